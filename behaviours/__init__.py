@@ -1,0 +1,1 @@
+"""py_trees task-level behaviours for the risk-gated executive."""

@@ -1,0 +1,1 @@
+"""Risk models: collision, fall, grasp, and their combination."""

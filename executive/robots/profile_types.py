@@ -1,0 +1,74 @@
+"""What the executive needs to know about a robot, beyond its MJCF.
+
+A profile is a small YAML file (see ``executive/robots/profiles/*.yaml``)
+loaded into these frozen dataclasses. Names refer to elements of the MJCF
+model; the world builder checks every one exists when it builds the model.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["ArmProfile", "FootProfile", "GripperProfile", "HandFrame", "RobotProfile"]
+
+
+@dataclass(frozen=True)
+class HandFrame:
+    """The grasp frame of a hand: an existing site, or a body plus an offset.
+
+    Convention: +z points from the palm towards the fingertips (the approach
+    direction); +y is the direction the jaws/fingers close along.
+    When ``site`` is None the world builder adds a site named
+    ``executive_<side>_hand`` on ``body`` at ``offset`` with ``quat``.
+    """
+
+    site: str | None = None
+    body: str | None = None
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)  # w x y z, in the body frame
+
+
+@dataclass(frozen=True)
+class GripperProfile:
+    """Actuators that open and close one hand, with their open and closed targets."""
+
+    actuators: tuple[str, ...]
+    open: tuple[float, ...]
+    closed: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class ArmProfile:
+    joints: tuple[str, ...]  # shoulder to wrist, in kinematic order
+    hand: HandFrame
+    gripper: GripperProfile
+    hand_body: str  # the root body of the hand (its subtree is "the hand")
+    forearm_body: str | None = None  # for per-body-part collision severity
+
+
+@dataclass(frozen=True)
+class FootProfile:
+    """A foot: the body whose geoms touch the ground (its sole)."""
+
+    body: str
+    geoms: tuple[str, ...] = ()  # empty: every collision geom of ``body``
+
+
+@dataclass(frozen=True)
+class RobotProfile:
+    name: str
+    base_body: str  # the floating base (pelvis)
+    torso_body: str  # for trunk tilt
+    head_body: str | None
+    keyframe: str  # the standing home pose
+    arms: dict[str, ArmProfile]  # keys "left" and "right"
+    feet: dict[str, FootProfile]  # keys "left" and "right"
+    waist_joints: tuple[str, ...]
+    leg_joints: dict[str, tuple[str, ...]]  # keys "left" and "right"
+    mjcf: Path | None = None  # the model this profile ships with (bundled robots)
+    source: Path | None = None  # the profile file
+
+    @property
+    def sides(self) -> tuple[str, ...]:
+        return tuple(sorted(self.arms))

@@ -1,0 +1,1 @@
+"""Bundled scenarios and robot models (installed as ``executive.bundled``)."""
