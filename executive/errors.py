@@ -8,8 +8,8 @@ from __future__ import annotations
 
 __all__ = [
     "ExecutiveError",
-    "ScenarioError",
     "RobotProfileError",
+    "ScenarioError",
     "WorldError",
 ]
 

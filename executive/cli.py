@@ -1,0 +1,135 @@
+"""The ``executive`` command.
+
+Exit codes: 0 done, 1 a mission/run failed, 2 bad input (a malformed scenario,
+an unknown name, a model that does not compile). Errors are one readable
+paragraph on stderr, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+from executive import registry
+from executive.errors import ExecutiveError
+from executive.scenario_types import Scenario
+from executive.world import World, build
+
+__all__ = ["main"]
+
+EXIT_OK = 0
+EXIT_FAILED = 1
+EXIT_BAD_INPUT = 2
+
+
+def _load(name: str) -> Scenario:
+    from executive.scenario import load
+
+    return load(name)
+
+
+def _cmd_list(args: argparse.Namespace) -> int:
+    from executive.scenario import load
+
+    print("Bundled scenarios:")
+    for name in registry.list_scenarios():
+        scenario = load(name)
+        first = scenario.description.strip().split(". ")[0]
+        print(f"  {name:<20} {first}")
+    print("Bundled robots:")
+    for name in registry.list_robots():
+        print(f"  {name}")
+    return EXIT_OK
+
+
+def _cmd_validate(args: argparse.Namespace) -> int:
+    scenario = _load(args.scenario)
+    world = build(scenario)
+    print(summary(scenario, world))
+    return EXIT_OK
+
+
+def summary(scenario: Scenario, world: World) -> str:
+    """A short human-readable description of a scenario and its compiled world."""
+    scene = scenario.scene
+    lines = [
+        f"scenario  {scenario.name}  ({scenario.source})",
+        f"robot     {scenario.robot.name}: {world.robot_dof} actuated DoF, "
+        f"{world.robot_mass:.1f} kg, model nq={world.model.nq} nv={world.model.nv} nu={world.model.nu}",
+        f"table     top at {scene.table.height:.3f} m, "
+        f"{scene.table.size[0]:.2f} x {scene.table.size[1]:.2f} m "
+        f"centred at ({scene.table.position[0]:.2f}, {scene.table.position[1]:.2f})",
+    ]
+    for label, bodies in (("object", scene.objects), ("obstacle", scene.obstacles)):
+        for b in bodies:
+            mass = f", {b.mass:.2f} kg" if b.mass is not None else ""
+            size = " x ".join(f"{s:.3f}" for s in b.size)
+            pos = ", ".join(f"{p:.3f}" for p in b.position)
+            lines.append(f"{label:<9} {b.name}: {b.shape} {size} m at ({pos}){mass}")
+    for i, task in enumerate(scenario.mission):
+        to = ", ".join(f"{v:.3f}" for v in task.to if v is not None)
+        lines.append(
+            f"task {i}    transfer {task.object} to ({to}); alternatives: {', '.join(task.alternatives)}"
+        )
+    u = scenario.uncertainty
+    lines.append(
+        f"uncertainty object {u.object_position * 1000:.0f} mm, "
+        f"obstacle {u.obstacle_position * 1000:.0f} mm, "
+        f"CoM {u.com * 1000:.0f} mm (1-sigma); risk threshold {scenario.risk.threshold}; "
+        f"approval {scenario.approval.mode}"
+    )
+    return "\n".join(lines)
+
+
+def _cmd_show(args: argparse.Namespace) -> int:
+    from executive.render import render_png
+    scenario = _load(args.scenario)
+    world = build(scenario)
+    out = render_png(world, Path(args.png), width=args.width, height=args.height)
+    print(summary(scenario, world))
+    print(f"picture   {out} ({args.width}x{args.height})")
+    return EXIT_OK
+
+
+def _parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="executive",
+        description="Risk-gated behaviour-tree executive for humanoid robots.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    scenario_help = "a scenario file path, or the name of a bundled scenario (see `executive list`)"
+
+    p = sub.add_parser("list", help="name the bundled scenarios and robots")
+    p.set_defaults(func=_cmd_list)
+
+    p = sub.add_parser("validate", help="load a scenario, build its world, print a summary")
+    p.add_argument("scenario", help=scenario_help)
+    p.set_defaults(func=_cmd_validate)
+
+    p = sub.add_parser("show", help="render the scenario's scene to a PNG (offscreen)")
+    p.add_argument("scenario", help=scenario_help)
+    p.add_argument("--png", required=True, help="output PNG file")
+    p.add_argument("--width", type=int, default=960)
+    p.add_argument("--height", type=int, default=720)
+    p.set_defaults(func=_cmd_show)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point of the console script; returns the exit code."""
+    args = _parser().parse_args(argv)
+    func: Callable[[argparse.Namespace], int] = args.func
+    try:
+        return func(args)
+    except ExecutiveError as exc:
+        print(f"executive {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print(f"executive {args.command}: interrupted", file=sys.stderr)
+        return EXIT_FAILED
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,62 @@
+"""Offscreen pictures of a world (MuJoCo's Renderer; ``MUJOCO_GL=egl`` on headless machines)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from executive.errors import ExecutiveError
+from executive.world import World
+
+__all__ = ["overview_camera", "render_png", "render_rgb"]
+
+
+def overview_camera(world: World) -> mujoco.MjvCamera:
+    """A free camera in front of the robot and to its left, looking at the table."""
+    table = world.scenario.scene.table
+    cam = mujoco.MjvCamera()
+    cam.type = mujoco.mjtCamera.mjCAMERA_FREE
+    cam.lookat[:] = [table.position[0] * 0.5, table.position[1], table.height * 1.15]
+    cam.distance = 3.1
+    cam.azimuth = 205.0
+    cam.elevation = -22.0
+    return cam
+
+
+def render_rgb(
+    world: World, width: int = 960, height: int = 720, camera: mujoco.MjvCamera | str | None = None
+) -> NDArray[np.uint8]:
+    """Render the world's current state to an RGB array (height x width x 3)."""
+    if width > world.model.vis.global_.offwidth or height > world.model.vis.global_.offheight:
+        raise ExecutiveError(
+            f"picture size {width}x{height} exceeds the model's offscreen buffer "
+            f"{world.model.vis.global_.offwidth}x{world.model.vis.global_.offheight}"
+        )
+    cam = camera if camera is not None else overview_camera(world)
+    try:
+        renderer = mujoco.Renderer(world.model, height=height, width=width)
+    except Exception as exc:  # no OpenGL context: say how to get one
+        raise ExecutiveError(
+            f"offscreen rendering failed ({exc}); on a headless machine set MUJOCO_GL=egl (or osmesa)"
+        ) from exc
+    try:
+        renderer.update_scene(world.data, camera=cam)
+        return np.asarray(renderer.render(), dtype=np.uint8)
+    finally:
+        renderer.close()
+
+
+def render_png(world: World, path: Path, width: int = 960, height: int = 720) -> Path:
+    """Render the world's current state to a PNG file and return its path."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.image
+
+    rgb = render_rgb(world, width, height)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    matplotlib.image.imsave(path, rgb)
+    return path

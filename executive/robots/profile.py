@@ -1,0 +1,173 @@
+"""Load and validate robot profiles (YAML) into :class:`~executive.robots.profile_types.RobotProfile`.
+
+The schema by example is ``scenarios/robots/humanoid/profile.yaml``::
+
+    name: humanoid
+    mjcf: humanoid.xml            # optional; relative to the profile file; must exist
+    base_body: pelvis
+    torso_body: torso
+    head_body: head               # optional (null: no head)
+    keyframe: stand
+    waist_joints: [...]
+    legs: {left: [...], right: [...]}
+    feet: {left: {body: ..., geoms: [...]}, right: {...}}      # geoms optional
+    arms:
+      left:
+        joints: [...]             # shoulder to wrist, non-empty
+        hand: {site: ...}         # or {body: ..., offset: [x, y, z], quat: [w, x, y, z]}
+        hand_body: ...
+        forearm_body: ...         # optional
+        gripper: {actuators: [...], open: [...], closed: [...]}   # equal lengths
+      right: {...}
+
+Every error is a :class:`~executive.errors.RobotProfileError` naming the file and key path.
+Whether the names exist in the MJCF model is checked by the world builder.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from executive import registry
+from executive.errors import RobotProfileError
+from executive.robots.profile_types import ArmProfile, FootProfile, GripperProfile, HandFrame, RobotProfile
+from executive.validation import Node, load_yaml_file, load_yaml_text
+
+__all__ = ["SIDES", "load_bundled_profile", "load_profile", "loads_profile", "profile_from_node"]
+
+#: The sides every profile describes, for arms, legs and feet.
+SIDES: tuple[str, ...] = ("left", "right")
+
+_TOP_REQUIRED = ("name", "base_body", "torso_body", "keyframe", "waist_joints", "legs", "feet", "arms")
+_TOP_OPTIONAL = ("mjcf", "head_body")
+
+
+def load_profile(path: Path) -> RobotProfile:
+    """Load the profile file at ``path``; a relative ``mjcf`` is resolved against its folder."""
+    path = Path(path).resolve()
+    root = load_yaml_file(path, RobotProfileError)
+    return profile_from_node(root, base_dir=path.parent, source_path=path)
+
+
+def loads_profile(text: str, source: str = "<string>", base_dir: Path | None = None) -> RobotProfile:
+    """Load a profile from YAML text; a relative ``mjcf`` is resolved against ``base_dir`` (default: cwd)."""
+    root = load_yaml_text(text, source, RobotProfileError)
+    return profile_from_node(root, base_dir=base_dir if base_dir is not None else Path.cwd())
+
+
+def load_bundled_profile(name: str) -> RobotProfile:
+    """Load the profile of the bundled robot ``name``."""
+    path = registry.robot_profile_path(name)
+    if path is None:
+        raise RobotProfileError(
+            name, "", f"unknown robot; bundled robots are: {', '.join(registry.list_robots()) or '(none)'}"
+        )
+    return load_profile(path)
+
+
+def profile_from_node(root: Node, base_dir: Path, source_path: Path | None = None) -> RobotProfile:
+    """Validate a parsed profile document (the root :class:`Node`) and build the profile."""
+    root.check_keys(_TOP_REQUIRED, _TOP_OPTIONAL)
+    # Read in schema order, so the first error reported is the first in the document.
+    name = root.get("name").string()
+    mjcf_node = root.opt("mjcf")
+    mjcf = mjcf_node.file_path(base_dir, "MJCF file") if mjcf_node is not None else None
+    base_body = root.get("base_body").string()
+    torso_body = root.get("torso_body").string()
+    head_node = root.opt("head_body")
+    head_body = head_node.string() if head_node is not None else None
+    keyframe = root.get("keyframe").string()
+    waist_joints = root.get("waist_joints").strings()
+    leg_joints = {side: node.strings(min_len=1) for side, node in _sides(root.get("legs"))}
+    feet = {side: _foot(node) for side, node in _sides(root.get("feet"))}
+    arms = {side: _arm(node) for side, node in _sides(root.get("arms"))}
+    profile = RobotProfile(
+        name=name,
+        base_body=base_body,
+        torso_body=torso_body,
+        head_body=head_body,
+        keyframe=keyframe,
+        arms=arms,
+        feet=feet,
+        waist_joints=waist_joints,
+        leg_joints=leg_joints,
+        mjcf=mjcf,
+        source=source_path,
+    )
+    _check_unique_joints(root, profile)
+    return profile
+
+
+def _sides(node: Node) -> list[tuple[str, Node]]:
+    node.check_keys(SIDES)
+    return [(side, node.get(side)) for side in SIDES]
+
+
+def _foot(node: Node) -> FootProfile:
+    node.check_keys(("body",), ("geoms",))
+    geoms = node.opt("geoms")
+    return FootProfile(body=node.get("body").string(), geoms=geoms.strings() if geoms is not None else ())
+
+
+def _arm(node: Node) -> ArmProfile:
+    node.check_keys(("joints", "hand", "hand_body", "gripper"), ("forearm_body",))
+    forearm = node.opt("forearm_body")
+    return ArmProfile(
+        joints=node.get("joints").strings(min_len=1),
+        hand=_hand(node.get("hand")),
+        gripper=_gripper(node.get("gripper")),
+        hand_body=node.get("hand_body").string(),
+        forearm_body=forearm.string() if forearm is not None else None,
+    )
+
+
+def _hand(node: Node) -> HandFrame:
+    node.check_keys(optional=("site", "body", "offset", "quat"))
+    site, body = node.opt("site"), node.opt("body")
+    if (site is None) == (body is None):
+        node.fail("expected exactly one of 'site' (an existing site) or 'body' (plus offset and quat)")
+    if site is not None or body is None:
+        for key in ("offset", "quat"):
+            if node.has(key):
+                node.child(key, None).fail(f"'{key}' only applies with 'body', not with 'site'")
+        return HandFrame(site=site.string() if site is not None else None)
+    offset_node, quat_node = node.opt("offset"), node.opt("quat")
+    offset = offset_node.numbers(3) if offset_node is not None else (0.0, 0.0, 0.0)
+    quat = (1.0, 0.0, 0.0, 0.0)
+    if quat_node is not None:
+        raw = quat_node.numbers(4)
+        norm = math.sqrt(sum(q * q for q in raw))
+        if norm < 1e-6:
+            quat_node.fail("expected a unit quaternion [w, x, y, z], got a zero quaternion")
+        quat = (raw[0] / norm, raw[1] / norm, raw[2] / norm, raw[3] / norm)
+    return HandFrame(body=body.string(), offset=(offset[0], offset[1], offset[2]), quat=quat)
+
+
+def _gripper(node: Node) -> GripperProfile:
+    node.check_keys(("actuators", "open", "closed"))
+    actuators = node.get("actuators").strings(min_len=1)
+    n = len(actuators)
+    targets = {}
+    for key in ("open", "closed"):
+        child = node.get(key)
+        if not isinstance(child.value, list) or len(child.value) != n:
+            child.expected(f"a list of {n} numbers (one per actuator)")
+        targets[key] = child.numbers(n)
+    return GripperProfile(actuators=actuators, open=targets["open"], closed=targets["closed"])
+
+
+def _check_unique_joints(root: Node, profile: RobotProfile) -> None:
+    """A joint may appear in one list only (waist, a leg, an arm)."""
+    seen: dict[str, str] = {}
+    lists: list[tuple[str, tuple[str, ...]]] = [("waist_joints", profile.waist_joints)]
+    lists += [(f"legs.{side}", profile.leg_joints[side]) for side in SIDES]
+    lists += [(f"arms.{side}.joints", profile.arms[side].joints) for side in SIDES]
+    for path, joints in lists:
+        for i, joint in enumerate(joints):
+            where = f"{path}[{i}]"
+            if joint in seen:
+                raise RobotProfileError(
+                    root.source, where, f"joint '{joint}' is listed twice (also at {seen[joint]})"
+                )
+            seen[joint] = where

@@ -1,0 +1,55 @@
+"""Shared fixtures: paths to test data and the shared G1 model, a clean py_trees blackboard."""
+
+from __future__ import annotations
+
+import os
+
+# Before anything imports mujoco: headless rendering through EGL (executive/__init__ does the
+# same, but test modules may import mujoco first).
+if not os.environ.get("MUJOCO_GL") and not os.environ.get("DISPLAY"):
+    os.environ["MUJOCO_GL"] = "egl"
+
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+# ../shared beside the checkout (CI clones main with shared/ beside it).
+G1_DIR = REPO.parent / "shared" / "robots" / "unitree_g1"
+G1_MJCF = G1_DIR / "g1_with_hands.xml"
+
+
+@pytest.fixture(autouse=True)
+def _clear_blackboard() -> None:
+    """py_trees' blackboard is global: start every test with an empty one."""
+    import py_trees
+
+    py_trees.blackboard.Blackboard.enable_activity_stream(maximum_size=100)
+    py_trees.blackboard.Blackboard.clear()
+
+
+@pytest.fixture
+def g1_mjcf() -> Path:
+    if not G1_MJCF.is_file():
+        pytest.skip(f"the shared Unitree G1 model is not at {G1_MJCF}")
+    return G1_MJCF
+
+
+@pytest.fixture
+def g1_scenario_yaml(g1_mjcf: Path) -> str:
+    """The book scene scaled to the Unitree G1 (1.3 m tall): lower, nearer table."""
+    mjcf = g1_mjcf
+    return f"""
+name: g1_book_transfer
+description: The book transfer scene around the Unitree G1 with Dex3 hands.
+robot: {{mjcf: {mjcf}, profile: unitree_g1}}
+scene:
+  table: {{position: [0.50, 0.0], size: [0.50, 1.0, 0.04], height: 0.66}}
+  objects:
+    - {{name: book, shape: box, size: [0.14, 0.09, 0.04], position: [0.33, 0.17], mass: 0.3}}
+  obstacles:
+    - {{name: book_stack, shape: box, size: [0.16, 0.12, 0.22], position: [0.38, 0.0]}}
+uncertainty: {{object_position: 0.01, object_yaw: 3, obstacle_position: 0.01, com: 0.01}}
+mission:
+  - transfer: {{object: book, to: [0.33, -0.17]}}
+"""
