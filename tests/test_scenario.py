@@ -35,12 +35,12 @@ def test_bundled_book_transfer_values() -> None:
     assert (book.name, book.shape, book.size, book.mass, book.friction) == (
         "book",
         "box",
-        (0.16, 0.11, 0.045),
+        (0.11, 0.22, 0.05),
         0.6,
         1.0,
     )
     # z omitted: resting on the table top, centre half the thickness above it
-    assert book.position == pytest.approx((0.48, 0.26, 0.80 + 0.0225))
+    assert book.position == pytest.approx((0.48, 0.26, 0.80 + 0.025))
     (stack,) = s.scene.obstacles
     assert stack.mass is None
     assert stack.position == pytest.approx((0.52, 0.0, 0.80 + 0.15))
