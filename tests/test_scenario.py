@@ -35,7 +35,7 @@ def test_bundled_book_transfer_values() -> None:
     assert (book.name, book.shape, book.size, book.mass, book.friction) == (
         "book",
         "box",
-        (0.11, 0.22, 0.05),
+        (0.22, 0.11, 0.05),
         0.6,
         1.0,
     )
