@@ -40,10 +40,10 @@ def test_bundled_book_transfer_values() -> None:
         1.0,
     )
     # z omitted: resting on the table top, centre half the thickness above it
-    assert book.position == pytest.approx((0.48, 0.26, 0.80 + 0.025))
+    assert book.position == pytest.approx((0.52, 0.26, 0.80 + 0.025))
     (stack,) = s.scene.obstacles
     assert stack.mass is None
-    assert stack.position == pytest.approx((0.52, 0.0, 0.80 + 0.15))
+    assert stack.position == pytest.approx((0.62, 0.0, 0.80 + 0.15))
     assert s.uncertainty.object_yaw_rad == pytest.approx(3.0 * math.pi / 180.0)
     assert s.uncertainty.object_position == 0.01
     assert s.uncertainty.object_mass == 0.10
@@ -58,7 +58,7 @@ def test_bundled_book_transfer_values() -> None:
     (task,) = s.mission
     assert task.kind == "transfer"
     assert task.object == "book"
-    assert task.to == (0.48, -0.26, None)
+    assert task.to == (0.52, -0.26, None)
     assert task.to_yaw_rad is None
     assert task.alternatives == ("left", "right", "left_to_right")
     assert s.trials == TrialsConfig(count=10, seed=0)

@@ -162,7 +162,7 @@ CASES = [
     Case("inf-uncertainty", text("com: 0.01", "com: .inf"), "uncertainty.com", "finite", on_text=True),
     Case(
         "minus-inf-position",
-        text("position: [0.48, 0.26]", "position: [-.inf, 0.26]"),
+        text("position: [0.52, 0.26]", "position: [-.inf, 0.26]"),
         "scene.objects[0].position[0]",
         "finite",
         on_text=True,
