@@ -85,12 +85,43 @@ def summary(scenario: Scenario, world: World) -> str:
 
 def _cmd_show(args: argparse.Namespace) -> int:
     from executive.render import render_png
+
     scenario = _load(args.scenario)
     world = build(scenario)
     out = render_png(world, Path(args.png), width=args.width, height=args.height)
     print(summary(scenario, world))
     print(f"picture   {out} ({args.width}x{args.height})")
     return EXIT_OK
+
+
+def _cmd_run(args: argparse.Namespace) -> int:
+    from executive.runner import run_alternative
+
+    scenario = _load(args.scenario)
+    task = scenario.mission[0]
+    if args.alternative is None:
+        raise ExecutiveError(
+            f"name the alternative to execute with --alternative (one of: {', '.join(task.alternatives)})"
+        )
+    if args.alternative not in task.alternatives:
+        raise ExecutiveError(
+            f"{scenario.source}: task 0 has no alternative '{args.alternative}'; "
+            f"its alternatives are: {', '.join(task.alternatives)}"
+        )
+    truth = "exact (truth = estimate)" if args.exact else f"sampled truth, seed {args.seed}"
+    print(f"run {scenario.name}: transfer {task.object}, alternative {args.alternative}, {truth}")
+    result = run_alternative(scenario, args.alternative, exact=args.exact, seed=args.seed)
+    print(f"outcome   {result.outcome}: {result.message}")
+    if result.outcome != "planning_failed":
+        print(
+            f"timing    planned {result.planned_duration_s:.1f} s of motion in {result.plan_s:.2f} s; "
+            f"executed {result.sim_time_s:.1f} s simulated in {result.wall_s:.1f} s wall "
+            f"(real-time factor {result.real_time_factor:.1f}), {result.ticks} ticks, "
+            f"longest tick {result.max_tick_s * 1000:.2f} ms"
+        )
+    if result.placement_error_m is not None:
+        print(f"placement {result.placement_error_m * 1000:.1f} mm from the target")
+    return EXIT_OK if result.success else EXIT_FAILED
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -114,6 +145,13 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--width", type=int, default=960)
     p.add_argument("--height", type=int, default=720)
     p.set_defaults(func=_cmd_show)
+
+    p = sub.add_parser("run", help="plan and execute an alternative of the mission in physics")
+    p.add_argument("scenario", help=scenario_help)
+    p.add_argument("--alternative", help="which way to do the task: left, right, left_to_right, ...")
+    p.add_argument("--exact", action="store_true", help="the truth equals the estimate (no sampled error)")
+    p.add_argument("--seed", type=int, default=None, help="seed of the sampled truth (default: trials.seed)")
+    p.set_defaults(func=_cmd_run)
     return parser
 
 

@@ -1,0 +1,111 @@
+"""Following a planned trajectory: move-hand, and its named uses lift, carry, place, retreat, home."""
+
+from __future__ import annotations
+
+import numpy as np
+import py_trees
+
+from behaviours.robot_access import RobotBehaviour
+from executive.planning import Trajectory
+
+__all__ = ["Carry", "Home", "Lift", "MoveHand", "Place", "Retreat"]
+
+Status = py_trees.common.Status
+
+
+class MoveHand(RobotBehaviour):
+    """Stream a planned trajectory's knots to the robot's joint servos, one control period per tick.
+
+    Succeeds once the trajectory has played and the hands have settled within
+    ``tolerance`` (m) of their planned final positions (or after ``settle_s``
+    more seconds, failing if they are still off); fails at once when a
+    physics detector flags a failure. ``update()`` never blocks: it only
+    samples the trajectory and writes targets.
+    """
+
+    phase: str = "free"  # what the detectors are told: free / lift / carry / place
+
+    def __init__(
+        self,
+        name: str,
+        trajectory: Trajectory,
+        tolerance: float = 0.03,
+        settle_s: float = 0.6,
+        touching: tuple[str, str] | None = None,
+    ) -> None:
+        super().__init__(name)
+        self.trajectory = trajectory
+        self.touching = touching  # (side, object) the hand may still touch (just released)
+        self.tolerance = tolerance
+        self.settle_s = settle_s
+        self._t0 = 0.0
+
+    def initialise(self) -> None:
+        self._t0 = self.robot.time
+        self.feedback_message = f"following {self.trajectory.name} ({self.trajectory.duration:.2f} s)"
+        self._set_detector_phase()
+
+    def _set_detector_phase(self) -> None:
+        holding: dict[str, str] = self.bb.holding
+        carried = next(iter(holding.items()), None) if holding else None
+        # Lifting off and setting down: the carried object may still/already touch the table.
+        placing = carried[1] if carried and self.phase in ("lift", "place") else None
+        self.robot.detector.set_phase(carried=carried, grasping=self.touching, placing=placing)
+
+    def update(self) -> Status:
+        if self.failed_by_detector():
+            return Status.FAILURE
+        t = self.robot.time - self._t0
+        self.robot.set_joint_targets(self.trajectory.sample(t))
+        if t < self.trajectory.duration:
+            self.feedback_message = f"{self.trajectory.name}: {t:.2f}/{self.trajectory.duration:.2f} s"
+            return Status.RUNNING
+        error = self.hand_error()
+        if error <= self.tolerance:
+            self.feedback_message = f"{self.trajectory.name}: reached (hand error {error * 1000:.0f} mm)"
+            return Status.SUCCESS
+        if t < self.trajectory.duration + self.settle_s:
+            return Status.RUNNING
+        self.feedback_message = (
+            f"{self.trajectory.name}: hand {error * 1000:.0f} mm from its planned end "
+            f"(tolerance {self.tolerance * 1000:.0f} mm)"
+        )
+        return Status.FAILURE
+
+    def hand_error(self) -> float:
+        """Largest distance between a hand site and its planned final position."""
+        data, sites = self.robot.data, self.robot.world.ids.hand_sites
+        return max(
+            float(np.linalg.norm(data.site_xpos[sites[side]] - path[-1]))
+            for side, path in self.trajectory.hand_paths.items()
+        )
+
+    def terminate(self, new_status: Status) -> None:
+        if new_status in (Status.FAILURE, Status.INVALID):
+            self.robot.hold()  # safe hold where the robot is
+
+
+class Lift(MoveHand):
+    """Raise a grasped object clear of the table."""
+
+    phase = "lift"
+
+
+class Carry(MoveHand):
+    """Transport a grasped object (transfer or handover approach)."""
+
+    phase = "carry"
+
+
+class Place(MoveHand):
+    """Lower a carried object onto the table (table contact is expected)."""
+
+    phase = "place"
+
+
+class Retreat(MoveHand):
+    """Move an empty hand away after releasing."""
+
+
+class Home(MoveHand):
+    """Return to the standing home posture."""

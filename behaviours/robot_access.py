@@ -1,0 +1,51 @@
+"""How behaviours reach the robot: blackboard keys, registered per behaviour.
+
+Keys (namespace ``/executive``):
+
+* ``robot``: the :class:`executive.execution.SimulatedRobot` (or any object with
+  the same methods) the host steps; read-only for behaviours.
+* ``holding``: ``dict[str, str]`` side -> name of the object that hand holds;
+  written by grasp/release behaviours, read by the others.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import py_trees
+
+__all__ = ["NAMESPACE", "RobotBehaviour", "install"]
+
+NAMESPACE = "/executive"
+
+
+def install(robot: Any) -> None:
+    """Put the robot on the blackboard (and an empty ``holding`` map) before ticking a tree."""
+    client = py_trees.blackboard.Client(name="executive.host", namespace=NAMESPACE)
+    client.register_key("robot", access=py_trees.common.Access.WRITE)
+    client.register_key("holding", access=py_trees.common.Access.WRITE)
+    client.robot = robot
+    client.holding = {}
+
+
+class RobotBehaviour(py_trees.behaviour.Behaviour):
+    """Base of the task-level behaviours: registered access to the robot and the holding map."""
+
+    def __init__(self, name: str, writes_holding: bool = False) -> None:
+        super().__init__(name=name)
+        self.bb = self.attach_blackboard_client(name=name, namespace=NAMESPACE)
+        self.bb.register_key("robot", access=py_trees.common.Access.READ)
+        access = py_trees.common.Access.WRITE if writes_holding else py_trees.common.Access.READ
+        self.bb.register_key("holding", access=access)
+
+    @property
+    def robot(self) -> Any:
+        return self.bb.robot
+
+    def failed_by_detector(self) -> bool:
+        """True (with the feedback message set) when the physics detectors flagged a failure."""
+        failure = self.robot.failure
+        if failure is None:
+            return False
+        self.feedback_message = f"{failure.mode}: {failure.detail}"
+        return True

@@ -1,0 +1,340 @@
+"""Expanding a task into alternative behaviour sequences, planning them, building their subtrees.
+
+A ``transfer`` task for a two-armed robot can be done four ways (seed study,
+section "Total risk"): ``left`` (pick and place with the left hand), ``right``,
+``left_to_right`` (pick left, hand over, place right) and ``right_to_left``.
+Each alternative is a list of :class:`Step` values (hand targets computed from
+the *estimate* of the scene), planned step after step with the whole-body
+planner into an :class:`AlternativePlan`, and turned into a py_trees Sequence.
+
+Grasp geometry: top-down, the jaws closing across the object's local y
+extent; a one-hand grasp at the object's centre, a handover grasp at the two
+ends of the object's local x axis (``handover_offset`` either side), so both
+hands fit side by side.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Literal
+
+import mujoco
+import numpy as np
+import py_trees
+from numpy.typing import NDArray
+
+from executive.errors import ExecutiveError
+from executive.planning import HandTarget, Planner, Trajectory
+from executive.scenario_types import ALTERNATIVES, TransferTask
+from executive.world import World
+
+__all__ = [
+    "AlternativePlan",
+    "CompositionConfig",
+    "Step",
+    "build_subtree",
+    "plan_alternative",
+    "transfer_steps",
+]
+
+FloatArray = NDArray[np.float64]
+StepKind = Literal["move", "lift", "carry", "place", "retreat", "home", "grasp", "release"]
+
+
+@dataclass(frozen=True)
+class CompositionConfig:
+    """Geometry of the waypoints (metres)."""
+
+    approach_height: float = 0.10  # pre-grasp / pre-place above the grasp pose
+    lift_height: float = 0.12  # lift above the grasp pose
+    grip_depth: float = 0.01  # hand site below the object's top face
+    handover_offset: float = 0.06  # grasp points either side of the object's centre
+    handover_point: tuple[float, float] = (0.30, 0.0)  # object centre x y at the handover
+    handover_height: float = 0.20  # object centre above the table top at the handover
+    obstacle_clearance: float = 0.03  # how close a one-arm carry skirts the obstacles' front
+
+
+@dataclass(frozen=True)
+class Step:
+    kind: StepKind
+    name: str
+    side: str
+    targets: tuple[HandTarget, ...] = ()
+    carried: tuple[str, str] | None = None
+    allow_contact: tuple[str, ...] = ()
+    obj: str = ""
+
+
+@dataclass(frozen=True)
+class AlternativePlan:
+    """An alternative planned on the estimate: its steps and one trajectory per motion step."""
+
+    name: str
+    task: TransferTask
+    steps: tuple[Step, ...]
+    trajectories: dict[str, Trajectory] = field(default_factory=dict)
+
+    @property
+    def duration(self) -> float:
+        return sum(t.duration for t in self.trajectories.values())
+
+    def ordered_trajectories(self) -> list[Trajectory]:
+        return [self.trajectories[s.name] for s in self.steps if s.name in self.trajectories]
+
+
+def _top_down_quat(yaw: float) -> FloatArray:
+    """Hand site frame with +z down and +y (closing) along the horizontal direction at ``yaw``."""
+    y_axis = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+    z_axis = np.array([0.0, 0.0, -1.0])
+    x_axis = np.cross(y_axis, z_axis)
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.column_stack([x_axis, y_axis, z_axis]).ravel())
+    return quat
+
+
+def _yaw_of(quat: FloatArray) -> float:
+    w, x, y, z = quat
+    return float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+
+
+def _home_targets(world: World) -> dict[str, HandTarget]:
+    """Hand site poses at the robot's home keyframe."""
+    data = mujoco.MjData(world.model)
+    mujoco.mj_resetDataKeyframe(world.model, data, world.ids.keyframe)
+    mujoco.mj_kinematics(world.model, data)
+    out = {}
+    for side, site in world.ids.hand_sites.items():
+        quat = np.zeros(4)
+        mujoco.mju_mat2Quat(quat, data.site_xmat[site])
+        out[side] = HandTarget(side, data.site_xpos[site].copy(), quat)
+    return out
+
+
+def transfer_steps(
+    world: World, task: TransferTask, alternative: str, config: CompositionConfig | None = None
+) -> list[Step]:
+    """The steps of one alternative of a transfer task, with targets from the estimate world."""
+    cfg = config or CompositionConfig()
+    sides = world.profile.sides
+    if alternative not in ALTERNATIVES:
+        raise ExecutiveError(f"unknown alternative '{alternative}'; valid: {', '.join(ALTERNATIVES)}")
+    if "left" not in sides or "right" not in sides:
+        raise ExecutiveError(f"robot '{world.profile.name}' needs a left and a right arm for '{alternative}'")
+    scene = world.scenario.scene
+    body = next(b for b in scene.objects if b.name == task.object)
+    obj = body.name
+    pos, quat = world.object_pose(obj)
+    yaw = _yaw_of(quat)
+    top = pos[2] + body.half_height()
+    grasp_z = max(pos[2], top - cfg.grip_depth)
+    site_above_centre = grasp_z - pos[2]
+    target_z = task.to[2] if task.to[2] is not None else scene.table.height + body.half_height()
+    place_yaw = task.to_yaw_rad if task.to_yaw_rad is not None else yaw
+    axis = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+    place_axis = np.array([np.cos(place_yaw), np.sin(place_yaw), 0.0])
+    up = np.array([0.0, 0.0, 1.0])
+    home = _home_targets(world)
+
+    def target(side: str, point: FloatArray, hand_yaw: float) -> HandTarget:
+        # The jaws are symmetric: of the two closing directions, take the one nearer the home pose's.
+        mat = np.zeros(9)
+        mujoco.mju_quat2Mat(mat, home[side].quat)
+        home_yaw = float(np.arctan2(mat[4], mat[1]))  # yaw of the home frame's y (closing) axis
+        closing = hand_yaw + np.pi / 2
+        if np.cos(closing - home_yaw) < 0:
+            closing += np.pi
+        return HandTarget(side, np.asarray(point, dtype=float), _top_down_quat(closing))
+
+    # Obstacle front: the carry skirts the nearest obstacle face at obstacle_clearance.
+    front_x = min(
+        (o.position[0] - (o.size[0] / 2 if o.shape == "box" else o.size[0]) for o in scene.obstacles),
+        default=pos[0],
+    )
+    length = body.size[0] if body.shape == "box" else 2 * body.size[0]
+
+    if alternative in ("left", "right"):
+        s = alternative
+        grasp = np.array([pos[0], pos[1], grasp_z])
+        place = np.array([task.to[0], task.to[1], target_z + site_above_centre])
+        lift_z = grasp[2] + cfg.lift_height
+        via = np.array([min(front_x - cfg.obstacle_clearance - length / 2, grasp[0]), 0.0, lift_z])
+        return [
+            Step("move", f"{s}.pre_grasp", s, (target(s, grasp + cfg.approach_height * up, yaw),)),
+            Step("move", f"{s}.approach", s, (target(s, grasp, yaw),), allow_contact=(obj,)),
+            Step("grasp", f"{s}.grasp", s, obj=obj),
+            Step("lift", f"{s}.lift", s, (target(s, grasp + cfg.lift_height * up, yaw),), carried=(s, obj)),
+            Step("carry", f"{s}.transfer", s, (target(s, via, (yaw + place_yaw) / 2),), carried=(s, obj)),
+            Step(
+                "carry",
+                f"{s}.pre_place",
+                s,
+                (target(s, place + cfg.approach_height * up, place_yaw),),
+                carried=(s, obj),
+            ),
+            Step(
+                "place",
+                f"{s}.place",
+                s,
+                (target(s, place, place_yaw),),
+                carried=(s, obj),
+                allow_contact=("table_top",),
+            ),
+            Step("release", f"{s}.release", s, obj=obj),
+            Step(
+                "retreat",
+                f"{s}.retreat",
+                s,
+                (target(s, place + cfg.approach_height * up, place_yaw),),
+                allow_contact=(obj,),
+            ),
+            Step("home", f"{s}.home", s, (home[s],), allow_contact=(obj,)),
+        ]
+
+    giver, receiver = alternative.split("_to_")
+    d = cfg.handover_offset
+    # The giver holds the object's -x end, the receiver its +x end.
+    grasp_g = np.array([*(pos[:2] - d * axis[:2]), grasp_z])
+    hx, hy = cfg.handover_point
+    h_centre = np.array([hx, hy, scene.table.height + cfg.handover_height + body.half_height()])
+    # At the handover the object lies across the body, the giver's end on the giver's side, so
+    # the hands meet side by side, each forearm coming from its own shoulder.
+    h_yaw = -np.pi / 2 if giver == "left" else np.pi / 2
+    h_axis = np.array([np.cos(h_yaw), np.sin(h_yaw), 0.0])
+    hand_g = h_centre - d * h_axis + site_above_centre * up
+    hand_r = h_centre + d * h_axis + site_above_centre * up
+    place_r = np.array([*(np.array(task.to[:2]) + d * place_axis[:2]), target_z + site_above_centre])
+    return [
+        Step("move", f"{giver}.pre_grasp", giver, (target(giver, grasp_g + cfg.approach_height * up, yaw),)),
+        Step("move", f"{giver}.approach", giver, (target(giver, grasp_g, yaw),), allow_contact=(obj,)),
+        Step("grasp", f"{giver}.grasp", giver, obj=obj),
+        Step(
+            "lift",
+            f"{giver}.lift",
+            giver,
+            (target(giver, grasp_g + cfg.lift_height * up, yaw),),
+            carried=(giver, obj),
+        ),
+        Step("carry", f"{giver}.to_handover", giver, (target(giver, hand_g, h_yaw),), carried=(giver, obj)),
+        Step(
+            "move",
+            f"{receiver}.pre_handover",
+            receiver,
+            (target(receiver, hand_r + cfg.approach_height * up, h_yaw),),
+            carried=(giver, obj),
+        ),
+        Step(
+            "move",
+            f"{receiver}.handover_approach",
+            receiver,
+            (target(receiver, hand_r, h_yaw),),
+            carried=(giver, obj),
+            allow_contact=(obj,),
+        ),
+        Step("grasp", f"{receiver}.grasp", receiver, obj=obj),
+        Step("release", f"{giver}.release", giver, obj=obj),
+        Step(
+            "retreat",
+            f"{giver}.retreat",
+            giver,
+            (home[giver],),
+            carried=(receiver, obj),
+            allow_contact=(obj,),
+        ),
+        Step(
+            "carry",
+            f"{receiver}.pre_place",
+            receiver,
+            (target(receiver, place_r + cfg.approach_height * up, place_yaw),),
+            carried=(receiver, obj),
+        ),
+        Step(
+            "place",
+            f"{receiver}.place",
+            receiver,
+            (target(receiver, place_r, place_yaw),),
+            carried=(receiver, obj),
+            allow_contact=("table_top",),
+        ),
+        Step("release", f"{receiver}.release", receiver, obj=obj),
+        Step(
+            "retreat",
+            f"{receiver}.retreat",
+            receiver,
+            (target(receiver, place_r + cfg.approach_height * up, place_yaw),),
+            allow_contact=(obj,),
+        ),
+        Step("home", f"{receiver}.home", receiver, (home[receiver],), allow_contact=(obj,)),
+    ]
+
+
+def plan_alternative(
+    planner: Planner,
+    world: World,
+    task: TransferTask,
+    alternative: str,
+    q_start: FloatArray | None = None,
+    config: CompositionConfig | None = None,
+) -> AlternativePlan:
+    """Plan every motion step of an alternative in order, each from where the previous ended.
+
+    Raises :class:`executive.planning.PlanningError` naming the step that cannot be reached.
+    """
+    steps = transfer_steps(world, task, alternative, config)
+    q = np.array(world.home_qpos() if q_start is None else q_start, dtype=float)
+    trajectories: dict[str, Trajectory] = {}
+    for step in steps:
+        if not step.targets:
+            continue
+        traj = planner.move(
+            q, list(step.targets), name=step.name, carried=step.carried, allow_contact=step.allow_contact
+        )
+        trajectories[step.name] = traj
+        q = traj.qpos[-1]
+    return AlternativePlan(alternative, task, tuple(steps), trajectories)
+
+
+def build_subtree(plan: AlternativePlan) -> py_trees.composites.Sequence:
+    """The alternative as a py_trees Sequence of task-level behaviours (a handover is its own subtree)."""
+    from behaviours.gripper import Grasp, Release
+    from behaviours.handover import handover_subtree
+    from behaviours.move_hand import Carry, Home, Lift, MoveHand, Place, Retreat
+
+    movers = {
+        "move": MoveHand,
+        "lift": Lift,
+        "carry": Carry,
+        "place": Place,
+        "retreat": Retreat,
+        "home": Home,
+    }
+    children: list[py_trees.behaviour.Behaviour] = []
+    steps = list(plan.steps)
+    i = 0
+    while i < len(steps):
+        step = steps[i]
+        if step.kind == "grasp" and i + 2 < len(steps) and steps[i + 1].kind == "release":
+            # receiver grasps, giver releases, giver retreats: the handover
+            release, retreat = steps[i + 1], steps[i + 2]
+            children.append(
+                handover_subtree(
+                    f"{release.side}_to_{step.side}.handover",
+                    giver=release.side,
+                    receiver=step.side,
+                    obj=step.obj,
+                    retreat=plan.trajectories[retreat.name],
+                )
+            )
+            i += 3
+            continue
+        if step.kind == "grasp":
+            children.append(Grasp(step.name, step.side, step.obj))
+        elif step.kind == "release":
+            children.append(Release(step.name, step.side, step.obj))
+        else:
+            # After a release the open jaws may still brush the object they let go of.
+            touching = (step.side, step.allow_contact[0]) if step.kind in ("retreat", "home") else None
+            children.append(
+                movers[step.kind](step.name, plan.trajectories[step.name], touching=touching or None)
+            )
+        i += 1
+    return py_trees.composites.Sequence(name=plan.name, memory=True, children=children)

@@ -1,0 +1,472 @@
+"""Whole-body motion planning with mink: hands to targets, feet fixed, CoM over the feet.
+
+:meth:`Planner.move` drives one or both hands to target poses from a start
+configuration by differential inverse kinematics (``mink.solve_ik`` with the
+``daqp`` QP solver), then re-times the geometric path (see
+:mod:`executive.planning_timing`). Everything runs on the *estimate* world's
+model (DESIGN.md, "Data flow"); the returned qpos index that model.
+
+The QP of every IK step (mink's formulation, ``min ||J dq + e||_W^2`` subject to
+``G dq <= h``, ``A dq = b``):
+
+* tasks: a ``FrameTask`` per named hand site; a ``ComTask`` pulling
+  the CoM xy towards the middle of the support polygon (modest cost: the robot
+  may lean); a ``PostureTask`` towards the keyframe, legs stiffest, then waist,
+  arms softest, except that an idle arm is held at its start joint angles
+  (it moves with the torso, so it cannot wander into it);
+* equality constraints: both feet bodies held at their start pose
+  (``FrameTask`` rows as constraints); finger and object dofs frozen
+  (``DofFreezingTask``);
+* limits: ``ConfigurationLimit``, ``VelocityLimit`` (the joints' velocity limits),
+  the CoM inside the feet's support polygon shrunk by a margin
+  (:class:`~executive.planning_limits.SupportPolygonLimit`), and collision
+  avoidance (:class:`~executive.planning_limits.GeomPairCollisionLimit`) between
+  each arm (and a carried object) and the table, obstacles and other objects,
+  between the arms, and between the arms and the rest of the body.
+
+A carried object is treated as part of its hand: its free-joint dofs are
+frozen in the QP, its collision Jacobian is taken on the palm, and after every
+IK step and at every knot its pose is set from the hand pose and the relative
+pose it had at the start.
+
+Three additions to plain differential IK keep it reliable:
+
+* via points (:mod:`executive.planning_route`): a hand whose straight way is
+  blocked by an obstacle passes over it (IK alone stops dead in front of it);
+* relaxation: when the hands stall short of the tolerance because the soft
+  posture task holds them back, its cost is scaled down (hard limits stay);
+* feet projection: after each step the feet's second-order drift is removed
+  by a minimum-norm correction with the feet rows as equality constraints.
+
+Types, errors and the configuration live in :mod:`executive.planning_types`
+and are re-exported here.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Sequence
+
+import mink
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from executive.planning_limits import GeomPairCollisionLimit, SupportPolygon, SupportPolygonLimit, geom_pairs
+from executive.planning_route import footprint, via_points, world_box
+from executive.planning_timing import Frames, TimedJoints, Trajectory, build_trajectory
+from executive.planning_types import (
+    HandTarget,
+    PlannerConfig,
+    PlanningError,
+    PlanningInputError,
+    PlanStats,
+    Relative,
+    attach_object,
+    body_pose,
+    hand_top_down_quat,
+    se3,
+    site_pose,
+)
+from executive.world import World
+
+__all__ = [
+    "HandTarget",
+    "PlanStats",
+    "Planner",
+    "PlannerConfig",
+    "PlanningError",
+    "PlanningInputError",
+    "Trajectory",
+    "hand_top_down_quat",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+class Planner:
+    """Whole-body differential-IK planner on a world's model (build once, call :meth:`move` often)."""
+
+    def __init__(self, world: World, config: PlannerConfig | None = None) -> None:
+        self.world = world
+        self.config = cfg = config or PlannerConfig()
+        model = self.model = world.model
+        ids = world.ids
+        self.sides: tuple[str, ...] = tuple(sorted(ids.hand_sites))
+        self.configuration = mink.Configuration(model)
+        self.last_stats: PlanStats | None = None
+
+        jnt = mujoco.mjtJoint
+        self.quat_adr = tuple(
+            int(model.jnt_qposadr[j]) + 3 for j in range(model.njnt) if model.jnt_type[j] == jnt.mjJNT_FREE
+        )
+        # Robot joint groups (hinge/slide only; the floating base is free).
+        name = self._joint_name
+        legs = {name(model.joint(n).id) for side in world.profile.leg_joints.values() for n in side}
+        waist = {name(model.joint(n).id) for n in world.profile.waist_joints}
+        arms = {name(j) for side in self.sides for j in ids.arm_joints[side]}
+        robot_joints = [
+            j
+            for j in range(model.njnt)
+            if model.jnt_bodyid[j] in ids.robot_bodies and model.jnt_type[j] != jnt.mjJNT_FREE
+        ]
+        others = [j for j in robot_joints if name(j) not in legs | waist | arms]  # fingers etc.
+        velocity = {n: cfg.leg_velocity for n in legs} | {n: cfg.waist_velocity for n in waist}
+        velocity |= {n: cfg.arm_velocity for n in arms}
+        self.timed_dofs = np.array([int(model.jnt_dofadr[model.joint(n).id]) for n in velocity], dtype=int)
+        self.timed_limits = np.array([velocity[n] * cfg.velocity_scale for n in velocity])
+        self.velocity_limits = {n: v * cfg.velocity_scale for n, v in velocity.items()}
+
+        posture_cost = np.zeros(model.nv)
+        for names, cost in (
+            (legs, cfg.posture_leg_cost),
+            (waist, cfg.posture_waist_cost),
+            (arms, cfg.posture_arm_cost),
+        ):
+            for n in names:
+                posture_cost[model.jnt_dofadr[model.joint(n).id]] = cost
+        self.posture_cost = posture_cost
+        self.posture = mink.PostureTask(model, cost=posture_cost)
+        self.arm_dofs = {
+            s: np.array([int(model.jnt_dofadr[j]) for j in ids.arm_joints[s]], dtype=int) for s in self.sides
+        }
+        self.arm_qadr = {
+            s: np.array([int(model.jnt_qposadr[j]) for j in ids.arm_joints[s]], dtype=int) for s in self.sides
+        }
+
+        frozen = [int(model.jnt_dofadr[j]) for j in others]
+        for qadr in ids.object_qpos.values():
+            joint = int(np.flatnonzero(model.jnt_qposadr == qadr)[0])
+            frozen.extend(range(int(model.jnt_dofadr[joint]), int(model.jnt_dofadr[joint]) + 6))
+        self.freeze = mink.DofFreezingTask(model, dof_indices=frozen)
+        self.feet = [
+            mink.FrameTask(world.profile.feet[s].body, "body", position_cost=1.0, orientation_cost=1.0)
+            for s in sorted(world.profile.feet)
+        ]
+        self.hands = {
+            s: mink.FrameTask(
+                int(ids.hand_sites[s]),
+                "site",
+                position_cost=cfg.hand_position_cost,
+                orientation_cost=cfg.hand_orientation_cost,
+            )
+            for s in self.sides
+        }
+        self.com = mink.ComTask(cost=[cfg.com_cost, cfg.com_cost, 0.0])
+        # mink's ComTask regulates body 1's subtree: it must be the robot's base.
+        if ids.base_body != 1:
+            raise PlanningInputError(f"the robot's base must be body 1 of the model, not {ids.base_body}")
+        self.static_limits: list[mink.Limit] = [
+            mink.ConfigurationLimit(model),
+            mink.VelocityLimit(model, velocity),
+        ]
+        self.foot_geoms = [g for s in sorted(ids.foot_geoms) for g in ids.foot_geoms[s]]
+        self._collision_groups()
+
+    # --- setup helpers ----------------------------------------------------------------------
+
+    def _joint_name(self, joint: int) -> str:
+        return str(mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_JOINT, joint))
+
+    def _collision_groups(self) -> None:
+        """Geom groups: each arm's subtree, the rest of the body, and the environment."""
+        model, ids = self.model, self.world.ids
+        self.arm_geoms: dict[str, list[int]] = {}
+        for side in self.sides:
+            root = int(model.jnt_bodyid[ids.arm_joints[side][0]])
+            subtree = {b for b in ids.robot_bodies if _descends(model, b, root)}
+            self.arm_geoms[side] = [g for g in ids.robot_geoms if int(model.geom_bodyid[g]) in subtree]
+        in_arms = {g for gs in self.arm_geoms.values() for g in gs}
+        self.body_geoms = [g for g in ids.robot_geoms if g not in in_arms]
+        self.static_env = [g for g in ids.table_geoms] + list(ids.obstacle_geoms.values())
+        self.geom_names = {
+            str(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)): g
+            for g in range(model.ngeom)
+            if mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
+        }
+
+    def collision_pairs(
+        self, carried: tuple[str, str] | None = None, allow_contact: Sequence[str] = ()
+    ) -> list[tuple[int, int]]:
+        """Geom pairs the planner keeps apart for a move (after ``allow_contact`` is removed)."""
+        ids = self.world.ids
+        allowed = {self._geom(n) for n in allow_contact}
+        carried_geom = ids.object_geoms[carried[1]] if carried else None
+        objects = [g for g in ids.object_geoms.values() if g != carried_geom]
+        env = self.static_env + objects
+        groups: list[tuple[Sequence[int], Sequence[int]]] = []
+        for side in self.sides:
+            groups += [(self.arm_geoms[side], env), (self.arm_geoms[side], self.body_geoms)]
+        for i, a in enumerate(self.sides):
+            for b in self.sides[i + 1 :]:
+                groups.append((self.arm_geoms[a], self.arm_geoms[b]))
+        if carried is not None and carried_geom is not None:
+            others = [g for s in self.sides if s != carried[0] for g in self.arm_geoms[s]]
+            groups.append(([carried_geom], env + self.body_geoms + others))
+        return [p for p in geom_pairs(self.model, groups) if not allowed & set(p)]
+
+    def _geom(self, name: str) -> int:
+        if name not in self.geom_names:
+            valid = ", ".join(sorted(self.geom_names))
+            raise PlanningInputError(f"allow_contact names no geom '{name}'; geoms are: {valid}")
+        return self.geom_names[name]
+
+    # --- planning ---------------------------------------------------------------------------
+
+    def move(
+        self,
+        q_start: FloatArray,
+        targets: Sequence[HandTarget],
+        *,
+        name: str,
+        carried: tuple[str, str] | None = None,
+        allow_contact: Sequence[str] = (),
+    ) -> Trajectory:
+        """Plan the whole body from ``q_start`` until every target hand is at its target.
+
+        Raises PlanningError when a hand is still outside tolerance after the
+        iteration budget (or when progress stalls), naming the side and the
+        remaining position and angle errors.
+        """
+        started = time.perf_counter()
+        cfg, model, ids = self.config, self.model, self.world.ids
+        self._check_request(q_start, targets, carried)
+        conf = self.configuration
+        conf.update(np.array(q_start, dtype=float))
+
+        goals = self._routes(targets, carried, allow_contact)
+        stage = {side: 0 for side in goals}
+        active = {side: route[0] for side, route in goals.items()}
+        # Posture: the keyframe, except that an idle arm holds its start joint angles (so it
+        # moves with the torso and cannot wander into it).
+        posture_target = self.world.home_qpos()
+        posture_cost = self.posture_cost.copy()
+        idle_dofs = np.zeros(model.nv, dtype=bool)
+        tasks: list[mink.Task] = [self.com, self.posture]
+        for side in self.sides:
+            if side in goals:
+                self.hands[side].set_target(goals[side][0])
+                tasks.append(self.hands[side])
+            else:
+                posture_target[self.arm_qadr[side]] = conf.q[self.arm_qadr[side]]
+                posture_cost[self.arm_dofs[side]] = cfg.idle_arm_cost
+                idle_dofs[self.arm_dofs[side]] = True
+        self.posture.set_target(posture_target)
+        self.posture.set_cost(posture_cost)
+        for foot in self.feet:
+            foot.set_target_from_configuration(conf)
+        polygon = SupportPolygon.from_feet(model, conf.data, self.foot_geoms)
+        self.com.set_target(np.array([*polygon.centre, 0.0]))
+
+        attach: dict[int, int] = {}
+        relative: Relative | None = None
+        if carried is not None:
+            side, obj = carried
+            hand_body = int(model.site_bodyid[ids.hand_sites[side]])
+            attach[ids.object_geoms[obj]] = hand_body
+            relative = (
+                ids.hand_sites[side],
+                ids.object_bodies[obj],
+                ids.object_qpos[obj],
+                site_pose(conf.data, ids.hand_sites[side]).inverse()
+                @ body_pose(conf.data, ids.object_bodies[obj]),
+            )
+        collisions = GeomPairCollisionLimit(
+            model,
+            self.collision_pairs(carried, allow_contact),
+            cfg.min_distance,
+            cfg.detection_distance,
+            cfg.collision_gain,
+            attach,
+        )
+        # Keep a small extra margin in the QP so that interpolated knots stay inside the checked one.
+        balance = SupportPolygonLimit(model, ids.base_body, polygon, cfg.support_margin + 0.002)
+        limits = [*self.static_limits, balance, collisions]
+        constraints: list[mink.Task] = [*self.feet, self.freeze]
+
+        clearance0 = collisions.distances(conf.data)
+        path = [conf.q]
+        errors = self._errors(active)
+        history = [max(p + a for p, a in errors.values())]
+        ik_time = 0.0
+        iterations = 0
+        relax = 1.0  # scale of the posture task's cost (idle arms excepted)
+        while not (self._arrived(errors) and all(stage[s] == len(goals[s]) - 1 for s in goals)):
+            if iterations >= cfg.max_iterations:
+                self._fail(name, errors, iterations)
+            if self._stalled(history, cfg.relax_iterations):
+                if relax <= cfg.relax_floor:
+                    self._fail(name, errors, iterations)
+                relax *= cfg.relax_factor
+                self.posture.set_cost(np.where(idle_dofs, posture_cost, posture_cost * relax))
+                history = history[-1:]
+            elif self._stalled(history, cfg.stall_iterations):
+                self._fail(name, errors, iterations)
+            tick = time.perf_counter()
+            try:
+                velocity = mink.solve_ik(
+                    conf,
+                    tasks,
+                    cfg.ik_dt,
+                    solver="daqp",
+                    damping=cfg.damping,
+                    limits=limits,
+                    constraints=constraints,
+                )
+            except mink.NoSolutionFound as exc:
+                side, (pos, ang) = max(errors.items(), key=lambda kv: kv[1][0])
+                raise PlanningError(
+                    name,
+                    side,
+                    pos,
+                    ang,
+                    iterations,
+                    f"motion '{name}': the IK QP has no solution after {iterations} iterations ({exc}); "
+                    f"{side} hand {pos:.3f} m and {np.degrees(ang):.1f} deg from its target",
+                ) from exc
+            ik_time += time.perf_counter() - tick
+            conf.integrate_inplace(velocity, cfg.ik_dt)
+            conf.update()
+            self._project_feet()
+            if relative is not None:
+                attach_object(conf.data, relative)
+                conf.update()
+            iterations += 1
+            path.append(conf.q)
+            errors = self._errors(active)
+            for side, (pos, _ang) in errors.items():
+                # A via point is passed, not reached: move on once the hand is near it.
+                if stage[side] < len(goals[side]) - 1 and pos < cfg.via_tolerance:
+                    stage[side] += 1
+                    active[side] = goals[side][stage[side]]
+                    self.hands[side].set_target(active[side])
+                    errors = self._errors(active)
+                    history = []
+            history.append(max(p + a for p, a in errors.values()))
+
+        trajectory = build_trajectory(
+            model,
+            cfg,
+            np.array(path),
+            name,
+            TimedJoints(self.timed_dofs, self.timed_limits),
+            Frames(dict(ids.hand_sites), ids.base_body, self.quat_adr),
+            carried,
+            relative,
+            polygon,
+            collisions,
+            clearance0,
+        )
+        self.last_stats = PlanStats(
+            name, iterations, ik_time, time.perf_counter() - started, len(trajectory.times)
+        )
+        return trajectory
+
+    def _routes(
+        self, targets: Sequence[HandTarget], carried: tuple[str, str] | None, allow_contact: Sequence[str]
+    ) -> dict[str, list[mink.SE3]]:
+        """Per moving hand: via points over obstacles in the way (planning_route), then the target."""
+        model, ids, data = self.model, self.world.ids, self.configuration.data
+        allowed = {self._geom(n) for n in allow_contact}
+        carried_geom = ids.object_geoms[carried[1]] if carried else None
+        blockers = [
+            g
+            for g in [*ids.obstacle_geoms.values(), *ids.object_geoms.values()]
+            if g not in allowed and g != carried_geom
+        ]
+        boxes = [world_box(model, data, g) for g in blockers]
+        routes: dict[str, list[mink.SE3]] = {}
+        for t in targets:
+            site = ids.hand_sites[t.side]
+            moving = [g for g in ids.robot_geoms if int(model.geom_bodyid[g]) in ids.hand_bodies[t.side]]
+            if carried is not None and carried[0] == t.side and carried_geom is not None:
+                moving.append(carried_geom)
+            extent = footprint(model, data, site, moving)
+            start = data.site_xpos[site].copy()
+            vias = via_points(
+                start, np.asarray(t.position, dtype=float), extent, boxes, self.config.via_clearance
+            )
+            routes[t.side] = [se3(v, t.quat) for v in vias] + [se3(t.position, t.quat)]
+        return routes
+
+    def _project_feet(self) -> None:
+        """Remove the feet's second-order drift after a step: the least-norm dq with the feet rows exact.
+
+        The same QP as a step (mink.solve_ik) with no task but the damping, so its solution is the
+        minimum-norm correction of the linearised feet constraints; each pass squares the error.
+        """
+        conf, cfg = self.configuration, self.config
+        for _ in range(3):
+            drift = max(float(np.linalg.norm(f.compute_error(conf))) for f in self.feet)
+            if drift < cfg.feet_tolerance:
+                return
+            velocity = mink.solve_ik(
+                conf,
+                [],
+                cfg.ik_dt,
+                solver="daqp",
+                damping=1.0,
+                limits=self.static_limits[:1],
+                constraints=[*self.feet, self.freeze],
+            )
+            conf.integrate_inplace(velocity, cfg.ik_dt)
+            conf.update()
+
+    def _check_request(
+        self, q_start: FloatArray, targets: Sequence[HandTarget], carried: tuple[str, str] | None
+    ) -> None:
+        q = np.asarray(q_start)
+        if q.shape != (self.model.nq,):
+            raise PlanningInputError(
+                f"q_start has shape {q.shape}; the world's model needs ({self.model.nq},)"
+            )
+        sides = [t.side for t in targets]
+        valid = ", ".join(self.sides)
+        for side in sides:
+            if side not in self.sides:
+                raise PlanningInputError(f"no hand '{side}'; hands are: {valid}")
+        if len(set(sides)) != len(sides) or not sides:
+            raise PlanningInputError(f"give one target per moving hand, at least one; got sides {sides}")
+        if carried is not None:
+            side, obj = carried
+            if side not in self.sides:
+                raise PlanningInputError(f"carried by hand '{side}'; hands are: {valid}")
+            if obj not in self.world.ids.object_bodies:
+                objs = ", ".join(sorted(self.world.ids.object_bodies))
+                raise PlanningInputError(f"carried object '{obj}' is not in the world; objects are: {objs}")
+
+    def _errors(self, goals: dict[str, mink.SE3]) -> dict[str, tuple[float, float]]:
+        data = self.configuration.data
+        out = {}
+        for side, goal in goals.items():
+            pose = site_pose(data, self.world.ids.hand_sites[side])
+            pos = float(np.linalg.norm(pose.translation() - goal.translation()))
+            ang = float(np.linalg.norm((goal.rotation().inverse() @ pose.rotation()).log()))
+            out[side] = (pos, ang)
+        return out
+
+    def _arrived(self, errors: dict[str, tuple[float, float]]) -> bool:
+        cfg = self.config
+        return all(p <= cfg.position_tolerance and a <= cfg.angle_tolerance_rad for p, a in errors.values())
+
+    def _stalled(self, history: list[float], n: int) -> bool:
+        return len(history) > n and history[-n - 1] - history[-1] < self.config.stall_improvement
+
+    def _fail(self, name: str, errors: dict[str, tuple[float, float]], iterations: int) -> None:
+        cfg = self.config
+        side, (pos, ang) = max(
+            errors.items(),
+            key=lambda kv: max(kv[1][0] / cfg.position_tolerance, kv[1][1] / cfg.angle_tolerance_rad),
+        )
+        raise PlanningError(name, side, pos, ang, iterations)
+
+
+# --- small helpers --------------------------------------------------------------------------
+
+
+def _descends(model: mujoco.MjModel, body: int, root: int) -> bool:
+    while body > 0:
+        if body == root:
+            return True
+        body = int(model.body_parentid[body])
+    return False

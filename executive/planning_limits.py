@@ -1,0 +1,262 @@
+"""Inequality limits of the whole-body planner: support polygon and collision avoidance.
+
+Both are ``mink.Limit`` subclasses, so ``mink.solve_ik`` stacks them with its own
+limits into ``G dq <= h``.
+
+* :class:`SupportPolygon` is the convex hull of the feet soles' footprint in the
+  ground plane, with the signed margin of a point to its (shrunk) edges.
+* :class:`SupportPolygonLimit` keeps the whole-robot CoM inside that polygon shrunk
+  by a margin, to first order: ``A (c + J_c dq) <= b`` (a velocity-damper form
+  like mink's ``ConfigurationLimit``).
+* :class:`GeomPairCollisionLimit` is mink's ``CollisionAvoidanceLimit`` on explicit,
+  pre-filtered geom pairs, with one addition: a geom may be *attached* to another
+  body (a carried object moves with the hand), so its Jacobian is taken on that
+  body instead of its own free joint.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+
+import mink
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = [
+    "GeomPairCollisionLimit",
+    "SupportPolygon",
+    "SupportPolygonLimit",
+    "can_collide",
+    "geom_pairs",
+]
+
+FloatArray = NDArray[np.float64]
+
+
+# --- support polygon ------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SupportPolygon:
+    """A convex polygon in the ground plane: vertices counter-clockwise, edges as ``A x <= b``.
+
+    ``normals`` (m, 2) are the unit outward edge normals, ``offsets`` (m,) their
+    offsets, so a point x is inside iff ``normals @ x <= offsets``.
+    """
+
+    vertices: FloatArray
+    normals: FloatArray
+    offsets: FloatArray
+
+    @classmethod
+    def from_points(cls, points: FloatArray) -> SupportPolygon:
+        hull = _convex_hull(np.asarray(points, dtype=float)[:, :2])
+        nxt = np.roll(hull, -1, axis=0)
+        edge = nxt - hull
+        # Counter-clockwise hull: the outward normal of edge (dx, dy) is (dy, -dx).
+        normals = np.stack([edge[:, 1], -edge[:, 0]], axis=1)
+        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+        offsets = np.einsum("ij,ij->i", normals, hull)
+        return cls(hull, normals, offsets)
+
+    @classmethod
+    def from_feet(cls, model: mujoco.MjModel, data: mujoco.MjData, geoms: Iterable[int]) -> SupportPolygon:
+        """Footprint of the sole geoms: corners of each geom's bounding box, projected to xy."""
+        signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+        corners = []
+        for g in geoms:
+            # geom_aabb: local bounding box (centre, half sizes); equals the box itself for a box geom.
+            centre, half = model.geom_aabb[g, :3], model.geom_aabb[g, 3:]
+            rot = data.geom_xmat[g].reshape(3, 3)
+            corners.append(data.geom_xpos[g] + (centre + signs * half) @ rot.T)
+        return cls.from_points(np.vstack(corners))
+
+    @property
+    def centre(self) -> FloatArray:
+        """Centroid of the polygon's area (shoelace formula)."""
+        x, y = self.vertices[:, 0], self.vertices[:, 1]
+        x1, y1 = np.roll(x, -1), np.roll(y, -1)
+        cross = x * y1 - x1 * y
+        area = 0.5 * float(np.sum(cross))
+        if abs(area) < 1e-12:
+            return np.asarray(self.vertices.mean(axis=0), dtype=float)
+        return np.array([np.sum((x + x1) * cross), np.sum((y + y1) * cross)]) / (6.0 * area)
+
+    def margin(self, point: FloatArray) -> float:
+        """Signed distance (m) from ``point`` (xy) to the nearest edge line; positive inside."""
+        return float(np.min(self.offsets - self.normals @ np.asarray(point, dtype=float)[:2]))
+
+
+def _convex_hull(points: FloatArray) -> FloatArray:
+    """Counter-clockwise convex hull (Andrew's monotone chain), no repeated end point."""
+    pts = np.unique(np.round(points, 12), axis=0)
+    if len(pts) < 3:
+        return pts
+
+    def cross(o: FloatArray, a: FloatArray, b: FloatArray) -> float:
+        return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
+
+    lower: list[FloatArray] = []
+    for p in pts:
+        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
+            lower.pop()
+        lower.append(p)
+    upper: list[FloatArray] = []
+    for p in pts[::-1]:
+        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
+            upper.pop()
+        upper.append(p)
+    return np.array(lower[:-1] + upper[:-1])
+
+
+class SupportPolygonLimit(mink.Limit):
+    """CoM xy of the subtree of ``body`` stays inside ``polygon`` shrunk by ``margin``.
+
+    Rows ``a_i^T J_c dq <= gain (b_i - margin - a_i^T c)``, with ``J_c`` from
+    ``mj_jacSubtreeCom`` (the Jacobian mink's ``ComTask`` uses).
+    """
+
+    def __init__(
+        self, model: mujoco.MjModel, body: int, polygon: SupportPolygon, margin: float, gain: float = 0.5
+    ) -> None:
+        self.model = model
+        self.body = body
+        self.normals = polygon.normals
+        self.bounds = polygon.offsets - margin
+        self.gain = gain
+        self._jac = np.empty((3, model.nv))
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt  # a position limit, like mink's ConfigurationLimit
+        data = configuration.data
+        mujoco.mj_jacSubtreeCom(self.model, data, self._jac, self.body)
+        com = data.subtree_com[self.body][:2]
+        G = self.normals @ self._jac[:2]
+        h = self.gain * (self.bounds - self.normals @ com)
+        return mink.Constraint(G=G, h=h)
+
+
+# --- collision pairs ------------------------------------------------------------------------
+
+
+def can_collide(model: mujoco.MjModel, g1: int, g2: int) -> bool:
+    """MuJoCo's own pair filters: contype/conaffinity, same body, parent-child, <exclude>."""
+    if not (
+        model.geom_contype[g1] & model.geom_conaffinity[g2]
+        or model.geom_contype[g2] & model.geom_conaffinity[g1]
+    ):
+        return False
+    b1, b2 = int(model.geom_bodyid[g1]), int(model.geom_bodyid[g2])
+    if model.body_weldid[b1] == model.body_weldid[b2]:
+        return False
+    w1, w2 = int(model.body_weldid[b1]), int(model.body_weldid[b2])
+    p1, p2 = int(model.body_weldid[model.body_parentid[w1]]), int(model.body_weldid[model.body_parentid[w2]])
+    # Parent-child filter (mjDSBL_FILTERPARENT); the world body (0) is nobody's filtered parent.
+    if (p1 == w2 and w2 != 0) or (p2 == w1 and w1 != 0):
+        return False
+    # <exclude> signatures are (body1 << 16) + body2 (MuJoCo's mj_collision filter).
+    signatures = model.exclude_signature[: model.nexclude]
+    return not np.any((signatures == (b1 << 16) + b2) | (signatures == (b2 << 16) + b1))
+
+
+def geom_pairs(
+    model: mujoco.MjModel, groups: Iterable[tuple[Sequence[int], Sequence[int]]]
+) -> list[tuple[int, int]]:
+    """Sorted, de-duplicated geom pairs of the cross products of ``groups`` MuJoCo could collide."""
+    out = {
+        (min(a, b), max(a, b))
+        for first, second in groups
+        for a in first
+        for b in second
+        if a != b and can_collide(model, a, b)
+    }
+    return sorted(out)
+
+
+class GeomPairCollisionLimit(mink.Limit):
+    """Normal-velocity limit between geom pairs (after mink's ``CollisionAvoidanceLimit``).
+
+    For a pair at distance ``d < detection_distance`` with witness points p1, p2
+    and unit normal n = (p2 - p1)/|p2 - p1|, the row is
+    ``-n^T (J_p2 - J_p1) dq <= gain (d - d_min)`` (0 once ``d <= d_min``): mink's
+    velocity damper, written for the displacement ``dq`` that mink's QP solves for.
+    ``attach`` maps a geom to the body whose Jacobian moves it (a carried object
+    moves with the palm, not with its own free joint, whose dofs the planner freezes).
+    """
+
+    def __init__(
+        self,
+        model: mujoco.MjModel,
+        pairs: Sequence[tuple[int, int]],
+        min_distance: float,
+        detection_distance: float,
+        gain: float,
+        attach: dict[int, int] | None = None,
+    ) -> None:
+        self.model = model
+        self.pairs = np.array(pairs, dtype=int).reshape(-1, 2)
+        self.min_distance = min_distance
+        self.detection_distance = detection_distance
+        self.gain = gain
+        bodies = np.array(model.geom_bodyid, dtype=int)
+        for geom, body in (attach or {}).items():
+            bodies[geom] = body
+        self.jac_body = bodies
+        self._fromto = np.empty(6)
+        self._jac1 = np.empty((3, model.nv))
+        self._jac2 = np.empty((3, model.nv))
+
+    def distances(self, data: mujoco.MjData) -> FloatArray:
+        """Signed distance of every pair (capped at the detection distance)."""
+        out = np.full(len(self.pairs), self.detection_distance)
+        for i in self._candidates(data):
+            g1, g2 = self.pairs[i]
+            out[i] = mujoco.mj_geomDistance(
+                self.model, data, int(g1), int(g2), self.detection_distance, self._fromto
+            )
+        return out
+
+    def _candidates(self, data: mujoco.MjData) -> NDArray[np.int_]:
+        """Bounding-sphere broadphase (as mink's): pairs that may be within the detection distance."""
+        if len(self.pairs) == 0:
+            return np.zeros(0, dtype=int)
+        g1, g2 = self.pairs[:, 0], self.pairs[:, 1]
+        gap = np.linalg.norm(data.geom_xpos[g1] - data.geom_xpos[g2], axis=1)
+        gap -= self.model.geom_rbound[g1] + self.model.geom_rbound[g2]
+        return np.flatnonzero(gap <= self.detection_distance)
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt  # a bound on the displacement, see the class docstring
+        model, data = self.model, configuration.data
+        rows: list[FloatArray] = []
+        bounds: list[float] = []
+        fromto, jac1, jac2 = self._fromto, self._jac1, self._jac2
+        for i in self._candidates(data):
+            g1, g2 = (int(g) for g in self.pairs[i])
+            dist = mujoco.mj_geomDistance(model, data, g1, g2, self.detection_distance, fromto)
+            if dist >= self.detection_distance:
+                continue
+            normal = fromto[3:] - fromto[:3]
+            length = float(np.linalg.norm(normal))
+            if length < 1e-9:  # touching: no witness direction, use the centres
+                normal = data.geom_xpos[g2] - data.geom_xpos[g1]
+                length = float(np.linalg.norm(normal))
+                if length < 1e-9:
+                    continue
+            normal = normal / length
+            if dist < 0:  # penetrating: fromto points run the other way (mink flips the sign too)
+                normal = -normal
+            # Contact-normal Jacobian of the witness points (mink's compute_contact_normal_jacobian).
+            mujoco.mj_jac(model, data, jac1, None, fromto[:3], int(self.jac_body[g1]))
+            mujoco.mj_jac(model, data, jac2, None, fromto[3:], int(self.jac_body[g2]))
+            rows.append(-(normal @ (jac2 - jac1)))
+            gap = dist - self.min_distance
+            # The QP variable of mink.build_ik is the displacement dq = v dt, so the damper bounds
+            # the approach per step by gain * gap (mink's own limit divides by dt as well, which
+            # for dt < 1 lets a step close more than the whole gap).
+            bounds.append(self.gain * gap if gap > 0 else 0.0)
+        if not rows:
+            return mink.Constraint()
+        return mink.Constraint(G=np.vstack(rows), h=np.array(bounds))

@@ -1,0 +1,218 @@
+"""Types of the whole-body planner: targets, configuration, errors, statistics, pose helpers.
+
+Re-exported by :mod:`executive.planning`; import them from there.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import mink
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from executive.errors import ExecutiveError
+
+__all__ = [
+    "HandTarget",
+    "PlanStats",
+    "PlannerConfig",
+    "PlanningError",
+    "PlanningInputError",
+    "Relative",
+    "attach_object",
+    "body_pose",
+    "hand_top_down_quat",
+    "se3",
+    "site_pose",
+]
+
+FloatArray = NDArray[np.float64]
+#: A carried object's attachment: (hand site, object body, object qpos address, pose in the site frame).
+Relative = tuple[int, int, int, mink.SE3]
+
+
+class PlanningError(ExecutiveError):
+    """A motion could not be planned: a hand target out of reach, or a balance or QP failure.
+
+    Attributes:
+        name: the trajectory (segment) name.
+        side: the hand that fell short (None when no hand is to blame).
+        position_error: remaining distance of that hand to its target (m).
+        angle_error: remaining rotation of that hand to its target (rad).
+    """
+
+    def __init__(
+        self,
+        name: str,
+        side: str | None,
+        position_error: float,
+        angle_error: float,
+        iterations: int,
+        reason: str | None = None,
+    ) -> None:
+        self.name = name
+        self.side = side
+        self.position_error = position_error
+        self.angle_error = angle_error
+        self.iterations = iterations
+        if reason is None:
+            reason = (
+                f"{side} hand cannot reach target '{name}': {position_error:.3f} m and "
+                f"{np.degrees(angle_error):.1f} deg short after {iterations} iterations"
+            )
+        super().__init__(reason)
+
+
+class PlanningInputError(ExecutiveError):
+    """A request names a side, object or geom the world does not have."""
+
+
+@dataclass(frozen=True)
+class HandTarget:
+    """Where a hand site should go: world position and orientation (w x y z)."""
+
+    side: str
+    position: FloatArray
+    quat: FloatArray
+
+
+@dataclass(frozen=True)
+class PlannerConfig:
+    """Tuning of the planner; defaults suit the embedded humanoid.
+
+    Tolerances and budget:
+        position_tolerance (m), angle_tolerance_rad: a hand has arrived within both.
+        max_iterations: IK steps per move before a PlanningError.
+        relax_iterations, relax_factor, relax_floor: when the hands' error improved less
+            than ``stall_improvement`` over ``relax_iterations`` steps short of the
+            tolerance (the soft posture and CoM tasks hold them back), scale those tasks'
+            costs by ``relax_factor``, down to ``relax_floor`` of their defaults. The hard
+            limits (CoM in the support polygon, clearance) are not relaxed.
+        stall_iterations, stall_improvement: stop early (and raise) when the worst
+            hand's error (m + rad) improved less than ``stall_improvement`` over the
+            last ``stall_iterations`` steps.
+    IK:
+        ik_dt: the IK step's pseudo time (s); the velocity limit bounds a step to v * ik_dt.
+        damping: mink's Levenberg-Marquardt damping on all dofs.
+        feet_tolerance: after each step the feet's pose error (m + rad, mink FrameTask
+            error) is projected out until below this.
+        hand_position_cost, hand_orientation_cost: FrameTask costs of a moving hand.
+        idle_arm_cost: PostureTask cost holding an idle arm's joints at their start angles.
+        com_cost: ComTask cost on x and y (none on z).
+        posture_leg_cost, posture_waist_cost, posture_arm_cost: PostureTask per joint group.
+    Balance and clearance:
+        support_margin: the CoM xy stays this far inside the feet's support polygon (m).
+        min_distance: clearance kept between avoided geom pairs (m).
+        detection_distance: pairs closer than this enter the QP (m).
+        collision_gain: mink's velocity-damper gain of the collision rows.
+        clearance_tolerance: the timed trajectory is checked at every knot; a pair closer
+            than min_distance minus this (m) is a PlanningError.
+        via_clearance: a hand whose straight way is blocked by an obstacle or object
+            passes over it with this clearance (m) (see executive.planning_route).
+        via_tolerance: a via point counts as passed within this distance (m).
+    Timing:
+        leg_velocity, waist_velocity, arm_velocity: joint velocity limits (rad/s).
+        velocity_scale: fraction of those limits the timed trajectory uses.
+        acceleration_limit: bound on the tangential joint acceleration (rad/s^2).
+        knot_spacing (s), max_knots, min_duration (s): the knot grid.
+    """
+
+    position_tolerance: float = 0.002
+    angle_tolerance_rad: float = float(np.radians(1.0))
+    max_iterations: int = 300
+    relax_iterations: int = 8
+    relax_factor: float = 0.1
+    relax_floor: float = 1e-3
+    stall_iterations: int = 60
+    stall_improvement: float = 1e-4
+    ik_dt: float = 0.02
+    feet_tolerance: float = 1e-5
+    damping: float = 1e-3
+    hand_position_cost: float = 50.0
+    hand_orientation_cost: float = 20.0
+    idle_arm_cost: float = 10.0
+    com_cost: float = 30.0
+    posture_leg_cost: float = 5.0
+    posture_waist_cost: float = 5.0
+    posture_arm_cost: float = 0.1
+    support_margin: float = 0.02
+    min_distance: float = 0.01
+    detection_distance: float = 0.10
+    clearance_tolerance: float = 0.002
+    collision_gain: float = 0.5
+    via_clearance: float = 0.04
+    via_tolerance: float = 0.03
+    leg_velocity: float = 2.0
+    waist_velocity: float = 1.5
+    arm_velocity: float = 2.0
+    velocity_scale: float = 0.5
+    acceleration_limit: float = 2.0
+    knot_spacing: float = 0.02
+    max_knots: int = 300
+    min_duration: float = 0.2
+
+
+@dataclass(frozen=True)
+class PlanStats:
+    """What the last :meth:`Planner.move` cost."""
+
+    name: str
+    iterations: int
+    ik_time_s: float  # time spent in mink.solve_ik (all steps)
+    total_time_s: float
+    knots: int
+
+
+def hand_top_down_quat(closing_axis_world: Sequence[float] = (0.0, 1.0, 0.0)) -> FloatArray:
+    """Hand site quaternion (w x y z) with site z = world -z and site y along the closing axis.
+
+    The closing axis is projected onto the horizontal plane; site x = y x z.
+    """
+    y = np.array(closing_axis_world, dtype=float)
+    y[2] = 0.0
+    norm = float(np.linalg.norm(y))
+    if norm < 1e-9:
+        raise PlanningInputError(f"closing axis {tuple(closing_axis_world)} has no horizontal component")
+    y /= norm
+    z = np.array([0.0, 0.0, -1.0])
+    rot = np.column_stack([np.cross(y, z), y, z])
+    quat = np.empty(4)
+    mujoco.mju_mat2Quat(quat, rot.reshape(-1))
+    return quat
+
+
+# --- pose helpers ----------------------------------------------------------------------------
+
+
+def se3(position: FloatArray, quat: FloatArray) -> mink.SE3:
+    """Pose from a position and a (normalised) w x y z quaternion."""
+    q = np.asarray(quat, dtype=float)
+    return mink.SE3.from_rotation_and_translation(
+        mink.SO3(wxyz=q / np.linalg.norm(q)), np.asarray(position, dtype=float)
+    )
+
+
+def site_pose(data: mujoco.MjData, site: int) -> mink.SE3:
+    """World pose of a site in the current kinematics."""
+    return mink.SE3.from_rotation_and_translation(
+        mink.SO3.from_matrix(data.site_xmat[site].reshape(3, 3)), data.site_xpos[site].copy()
+    )
+
+
+def body_pose(data: mujoco.MjData, body: int) -> mink.SE3:
+    """World pose of a body in the current kinematics."""
+    return mink.SE3.from_rotation_and_translation(
+        mink.SO3(wxyz=data.xquat[body].copy()), data.xpos[body].copy()
+    )
+
+
+def attach_object(data: mujoco.MjData, relative: Relative) -> None:
+    """Put a carried object's free joint at hand pose x relative pose (needs current kinematics)."""
+    site, _body, qadr, rel = relative
+    pose = site_pose(data, site) @ rel
+    data.qpos[qadr : qadr + 3] = pose.translation()
+    quat = pose.rotation().wxyz
+    data.qpos[qadr + 3 : qadr + 7] = quat / np.linalg.norm(quat)
