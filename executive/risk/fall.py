@@ -1,0 +1,566 @@
+"""Fall risk: the CoM against the support polygon, in the ground plane.
+
+Sources (one line each):
+- Seed (Long et al. 2018, "fall risk"): an uncertainty circle of radius r around the estimated
+  CoM; "risk grows as the circle leaves the polygon (m - r)". Here: risk = ((r - m) / (2 r))^b
+  for m < r, else 0, clipped to [0, 1] (0 when the circle just touches the edge, 1 once it is
+  entirely outside, m = -r); b = FallRiskConfig.exponent.
+- Convex hull: Andrew's monotone chain (A. M. Andrew, Inf. Process. Lett. 9(5):216-219, 1979).
+- Per-edge probability: p_i = Phi(-(b_i - a_i.mu) / sqrt(a_i^T Sigma a_i)) for CoM ~ N(mu, Sigma);
+  Boole: max p_i <= P(outside) <= min(1, sum p_i).
+- Exact P(inside): whiten (z = L^-1 (x - mu), Sigma = L L^T), split the polygon into signed
+  triangles (0, v_i, v_i+1), each a difference of right triangles (0, foot, foot + s t) whose
+  standard-normal mass is atan(s/h)/(2 pi) - T(h, s/h) with Owen's T (Owen 1956, Ann. Math.
+  Stat. 27:1075); cross-check: the polar reduction (1/2 pi) sum_i c_i int (1 - e^{-(c_i^2+s^2)/2})
+  / (c_i^2 + s^2) ds along each edge, by composite Gauss-Legendre quadrature.
+- Capture point (Pratt et al. 2006; Koolen et al. 2012, IJRR 31(9)): xi = c + c_dot / omega,
+  omega = sqrt(g / h), h the CoM height above the ground.
+
+Trajectory probability. The CoM estimate's error is a bias e ~ N(0, Sigma) that persists over
+the motion (a model error, not independent noise per knot), so the motion fails iff at some
+knot mu_k + e leaves that knot's polygon P_k, i.e. iff e lies outside the intersection
+S = cap_k (P_k - mu_k). That intersection is again a convex polygon, so the point estimate
+``probability`` is exact: P(e not in S). When the shifted polygons nest (the CoM heads towards
+one edge), S is the worst knot's shifted polygon and the probability is the worst knot's;
+in general it is at least that. Bounds: lower = max over knots of the exact per-knot
+probability (``details["probability_worst_knot"]``), upper = min(1, Boole sum over the
+edges of S).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal
+
+import mujoco
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.special import owens_t
+
+from executive.planning_timing import Trajectory
+from executive.risk.gaussian import McEstimate, normal_cdf, union_bounds
+from executive.risk.report import RiskReport
+from executive.scenario_types import RiskConfig, Uncertainty
+from executive.world import World
+
+__all__ = [
+    "assess_fall",
+    "capture_point",
+    "clip_polygon",
+    "convex_hull",
+    "edge_probabilities",
+    "halfplanes",
+    "persistent_bias_probability",
+    "polygon_area",
+    "probability_outside",
+    "probability_outside_mc",
+    "seed_fall_risk",
+    "signed_margin",
+    "support_polygon",
+]
+
+FloatArray = NDArray[np.float64]
+
+_EPS = 1e-12
+
+
+# --- planar geometry ----------------------------------------------------------------------
+
+
+def _cross(o: FloatArray, a: FloatArray, b: FloatArray) -> float:
+    return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
+
+
+def convex_hull(points: ArrayLike) -> FloatArray:
+    """Convex hull (V, 2) of 2D points, counter-clockwise, no repeated or collinear vertices.
+
+    Andrew's monotone chain: sort by (x, y), build the lower and the upper chain keeping
+    only left turns. Turns with a cross product below 1e-12 x (the points' extent)^2 count as
+    collinear (no slivers). Fewer than 3 distinct non-collinear points give 1 or 2 rows.
+    """
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    if not np.all(np.isfinite(pts)):
+        raise ValueError("convex_hull: points must be finite")
+    pts = np.unique(pts, axis=0)  # sorted lexicographically by (x, y)
+    if len(pts) <= 2:
+        return pts
+    tol = 1e-12 * float(np.max(np.ptp(pts, axis=0))) ** 2
+    lower: list[FloatArray] = []
+    for p in pts:
+        while len(lower) >= 2 and _cross(lower[-2], lower[-1], p) <= tol:
+            lower.pop()
+        lower.append(p)
+    upper: list[FloatArray] = []
+    for p in pts[::-1]:
+        while len(upper) >= 2 and _cross(upper[-2], upper[-1], p) <= tol:
+            upper.pop()
+        upper.append(p)
+    hull = np.array(lower[:-1] + upper[:-1], dtype=float)
+    return hull
+
+
+def polygon_area(polygon: ArrayLike) -> float:
+    """Signed area (shoelace formula); positive for a counter-clockwise polygon."""
+    v = np.asarray(polygon, dtype=float).reshape(-1, 2)
+    if len(v) < 3:
+        return 0.0
+    w = np.roll(v, -1, axis=0)
+    return 0.5 * float(np.sum(v[:, 0] * w[:, 1] - w[:, 0] * v[:, 1]))
+
+
+def _check_polygon(polygon: ArrayLike) -> FloatArray:
+    v = np.asarray(polygon, dtype=float).reshape(-1, 2)
+    if len(v) < 3 or polygon_area(v) <= 0.0:
+        raise ValueError(
+            f"expected a counter-clockwise convex polygon with at least 3 vertices and positive "
+            f"area, got {len(v)} vertices (area {polygon_area(v):.3g})"
+        )
+    return v
+
+
+def halfplanes(polygon: ArrayLike) -> tuple[FloatArray, FloatArray]:
+    """(A, b) with A's rows the edges' unit outward normals: x inside <=> A x <= b.
+
+    Edge i runs from vertex i to vertex i+1 (cyclically) of the counter-clockwise polygon.
+    """
+    v = _check_polygon(polygon)
+    e = np.roll(v, -1, axis=0) - v
+    length = np.hypot(e[:, 0], e[:, 1])
+    if np.any(length <= 0.0):
+        raise ValueError("halfplanes: the polygon has repeated vertices")
+    a = np.column_stack([e[:, 1], -e[:, 0]]) / length[:, None]
+    b = np.einsum("ij,ij->i", a, v)
+    return a, b
+
+
+def signed_margin(polygon: ArrayLike, point: ArrayLike) -> float:
+    """Signed distance of ``point`` to the polygon's boundary, positive inside.
+
+    Inside: min_i (b_i - a_i.x) (for a convex polygon that is the distance to the nearest
+    edge). Outside: minus the Euclidean distance to the nearest edge segment (so near a vertex
+    it is the distance to that vertex, not to an edge's line).
+    """
+    v = _check_polygon(polygon)
+    x = np.asarray(point, dtype=float).reshape(-1)[:2]
+    a, b = halfplanes(v)
+    slack = b - a @ x
+    if np.all(slack >= 0.0):
+        return float(np.min(slack))
+    w = np.roll(v, -1, axis=0)
+    e = w - v
+    t = np.clip(np.einsum("ij,ij->i", x - v, e) / np.einsum("ij,ij->i", e, e), 0.0, 1.0)
+    nearest = v + t[:, None] * e
+    gap = nearest - x
+    return -float(np.min(np.hypot(gap[:, 0], gap[:, 1])))
+
+
+def clip_polygon(polygon: ArrayLike, normal: ArrayLike, offset: float) -> FloatArray:
+    """The part of a convex polygon with ``normal . x <= offset`` (Sutherland-Hodgman, one plane).
+
+    Returns the (possibly empty, shape (0, 2)) clipped polygon, counter-clockwise.
+    """
+    v = np.asarray(polygon, dtype=float).reshape(-1, 2)
+    n = np.asarray(normal, dtype=float).reshape(2)
+    if len(v) == 0:
+        return v
+    d = v @ n - offset
+    if np.all(d <= 0.0):
+        return v
+    if np.all(d > 0.0):
+        return np.zeros((0, 2))
+    out: list[FloatArray] = []
+    count = len(v)
+    for i in range(count):
+        j = (i + 1) % count
+        if d[i] <= 0.0:
+            out.append(v[i])
+        if (d[i] <= 0.0) != (d[j] <= 0.0):
+            t = d[i] / (d[i] - d[j])
+            out.append(v[i] + t * (v[j] - v[i]))
+    return convex_hull(np.array(out)) if len(out) >= 3 else np.zeros((0, 2))
+
+
+# --- the seed's uncertainty circle ------------------------------------------------------------
+
+
+def seed_fall_risk(margin: float, radius: float, exponent: float) -> float:
+    """Seed risk of a CoM uncertainty circle of ``radius`` whose centre has signed ``margin``.
+
+    0 while the circle is inside (m >= r); ((r - m) / (2 r))^exponent as it leaves, reaching 1
+    when the whole circle is outside (m <= -r). radius 0: 1 if m < 0 else 0.
+    """
+    if radius < 0.0 or exponent <= 0.0:
+        raise ValueError(f"seed_fall_risk: need radius >= 0 and exponent > 0, got {radius}, {exponent}")
+    if margin >= radius:
+        return 0.0
+    if radius == 0.0:
+        return 1.0
+    return float(np.clip((radius - margin) / (2.0 * radius), 0.0, 1.0) ** exponent)
+
+
+# --- probabilities for CoM ~ N(mu, Sigma) -----------------------------------------------------
+
+
+def _covariance(cov: ArrayLike) -> FloatArray:
+    c = np.asarray(cov, dtype=float)
+    if c.ndim == 0:
+        c = float(c) * np.eye(2)
+    c = c.reshape(2, 2)
+    if not np.all(np.isfinite(c)) or not np.allclose(c, c.T, atol=1e-15, rtol=1e-9):
+        raise ValueError(f"covariance must be a finite symmetric 2x2 matrix, got {c.tolist()}")
+    if np.min(np.linalg.eigvalsh(c)) < -1e-15 * max(1.0, float(np.max(np.abs(c)))):
+        raise ValueError(f"covariance must be positive semi-definite, got {c.tolist()}")
+    return c
+
+
+def edge_probabilities(polygon: ArrayLike, mean: ArrayLike, cov: ArrayLike) -> FloatArray:
+    """Per-edge p_i = P(a_i . X > b_i) = Phi(-(b_i - a_i . mu) / sqrt(a_i^T Sigma a_i)).
+
+    An edge direction with zero variance gives the indicator of the mean being beyond it.
+    """
+    a, b = halfplanes(polygon)
+    mu = np.asarray(mean, dtype=float).reshape(-1)[:2]
+    c = _covariance(cov)
+    slack = b - a @ mu
+    var = np.einsum("ij,jk,ik->i", a, c, a)
+    p = np.where(slack < 0.0, 1.0, 0.0)
+    pos = var > 0.0
+    p[pos] = normal_cdf(-slack[pos] / np.sqrt(var[pos]))
+    return np.asarray(p, dtype=float)
+
+
+def _whiten(polygon: FloatArray, mean: FloatArray, cov: FloatArray) -> FloatArray | None:
+    """Polygon vertices in whitened coordinates z = L^-1 (x - mu); None for a zero covariance."""
+    scale = float(np.max(np.abs(cov)))
+    if scale == 0.0:
+        return None
+    try:
+        chol = np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:  # singular but non-zero: a negligible isotropic jitter
+        chol = np.linalg.cholesky(cov + 1e-12 * scale * np.eye(2))
+    return np.asarray(np.linalg.solve(chol, (polygon - mean).T).T, dtype=float)
+
+
+def _edges_local(z: FloatArray) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Per edge of a CCW polygon (whitened): signed distance c of the origin to its line along the
+    outward normal (c > 0: origin on the inner side) and the edge's end coordinates s_a < s_b along
+    its direction, measured from the foot of the perpendicular from the origin."""
+    nxt = np.roll(z, -1, axis=0)
+    e = nxt - z
+    t = e / np.hypot(e[:, 0], e[:, 1])[:, None]
+    n = np.column_stack([t[:, 1], -t[:, 0]])
+    c = np.einsum("ij,ij->i", n, z)
+    return c, np.einsum("ij,ij->i", t, z), np.einsum("ij,ij->i", t, nxt)
+
+
+def _inside_owens_t(z: FloatArray) -> float:
+    c, sa, sb = _edges_local(z)
+    h = np.abs(c)
+    keep = h > 0.0
+    h, c, sa, sb = h[keep], c[keep], sa[keep], sb[keep]
+
+    def right_triangle(s: FloatArray) -> FloatArray:
+        # Mass of the triangle (0, foot, foot + s t): angle/(2 pi) minus the part beyond the
+        # distance-h line, Owen's T(h, s/h) = P(X > h, 0 < Y < (s/h) X). Odd in s.
+        with np.errstate(over="ignore"):
+            ratio = s / h
+        return np.arctan2(s, h) / (2.0 * np.pi) - owens_t(h, ratio)
+
+    return float(np.sum(np.sign(c) * (right_triangle(sb) - right_triangle(sa))))
+
+
+def _inside_quadrature(z: FloatArray, panel: float = 0.5, order: int = 20) -> float:
+    c, sa, sb = _edges_local(z)
+    x, w = np.polynomial.legendre.leggauss(order)
+    total = 0.0
+    for ci, lo, hi in zip(c, sa, sb, strict=True):
+        if ci == 0.0:
+            continue
+        panels = max(1, int(np.ceil((hi - lo) / panel)))
+        edges = np.linspace(lo, hi, panels + 1)
+        half = 0.5 * np.diff(edges)
+        mid = 0.5 * (edges[:-1] + edges[1:])
+        s = (mid[:, None] + half[:, None] * x[None, :]).ravel()
+        weights = (half[:, None] * w[None, :]).ravel()
+        r2 = ci * ci + s * s
+        g = -np.expm1(-0.5 * r2) / r2  # (1 - e^{-r^2/2}) / r^2, smooth (-> 1/2 at r = 0)
+        total += ci * float(np.sum(weights * g))
+    return total / (2.0 * np.pi)
+
+
+def probability_outside(
+    polygon: ArrayLike,
+    mean: ArrayLike,
+    cov: ArrayLike,
+    method: Literal["owens_t", "quadrature"] = "owens_t",
+) -> float:
+    """Exact P(X outside the polygon), X ~ N(mean, cov), by whitening and signed triangles.
+
+    ``owens_t`` uses the closed form with Owen's T function; ``quadrature`` integrates the
+    polar-reduced density along each edge with composite Gauss-Legendre (both ~1e-12).
+    A zero covariance gives the indicator of the mean being outside.
+    """
+    v = _check_polygon(polygon)
+    mu = np.asarray(mean, dtype=float).reshape(-1)[:2]
+    c = _covariance(cov)
+    z = _whiten(v, mu, c)
+    if z is None:
+        return 1.0 if signed_margin(v, mu) < 0.0 else 0.0
+    if method == "owens_t":
+        inside = _inside_owens_t(z)
+    elif method == "quadrature":
+        inside = _inside_quadrature(z)
+    else:
+        raise ValueError(f"probability_outside: method must be 'owens_t' or 'quadrature', got {method!r}")
+    return float(np.clip(1.0 - inside, 0.0, 1.0))
+
+
+def probability_outside_mc(
+    polygon: ArrayLike, mean: ArrayLike, cov: ArrayLike, rng: np.random.Generator, samples: int
+) -> McEstimate:
+    """Monte Carlo estimate of P(X outside the polygon), X ~ N(mean, cov), with its standard error."""
+    if samples < 1:
+        raise ValueError(f"probability_outside_mc: samples must be >= 1, got {samples}")
+    a, b = halfplanes(polygon)
+    mu = np.asarray(mean, dtype=float).reshape(-1)[:2]
+    x = rng.multivariate_normal(mu, _covariance(cov), size=samples, method="cholesky")
+    outside = np.any(x @ a.T > b, axis=1)
+    p = float(np.mean(outside))
+    return McEstimate(p, float(np.sqrt(max(p * (1.0 - p), 0.0) / samples)), samples)
+
+
+# --- capture point ----------------------------------------------------------------------------
+
+
+def capture_point(
+    com: ArrayLike, com_velocity: ArrayLike, gravity: float = 9.81, ground_height: float = 0.0
+) -> FloatArray:
+    """Instantaneous capture point xi = c + c_dot / omega (xy), omega = sqrt(g / h), h = c_z - ground."""
+    c = np.asarray(com, dtype=float).reshape(3)
+    cd = np.asarray(com_velocity, dtype=float).reshape(-1)
+    height = float(c[2] - ground_height)
+    if gravity <= 0.0 or height <= 0.0:
+        raise ValueError(
+            f"capture_point: need g > 0 and the CoM above the ground, got g={gravity}, h={height}"
+        )
+    omega = float(np.sqrt(gravity / height))
+    return np.asarray(c[:2] + cd[:2] / omega, dtype=float)
+
+
+# --- the robot's support polygon -------------------------------------------------------------
+
+
+def _ground_height(world: World, data: mujoco.MjData) -> float:
+    floor = world.ids.floor_geom
+    return float(data.geom_xpos[floor][2]) if floor >= 0 else 0.0
+
+
+def _foot_points(world: World, data: mujoco.MjData) -> FloatArray:
+    """Candidate ground-contact points (3D) of the foot geoms: box soles' bottom-face corners."""
+    model = world.model
+    points: list[FloatArray] = []
+    for geoms in world.ids.foot_geoms.values():
+        for g in geoms:
+            centre = data.geom_xpos[g]
+            if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
+                rot = data.geom_xmat[g].reshape(3, 3)
+                size = model.geom_size[g]
+                k = int(np.argmax(np.abs(rot[2])))  # local axis closest to the vertical
+                sign = -np.sign(rot[2, k]) if rot[2, k] != 0.0 else -1.0
+                others = [i for i in range(3) if i != k]
+                for s1 in (-1.0, 1.0):
+                    for s2 in (-1.0, 1.0):
+                        local = np.zeros(3)
+                        local[k] = sign * size[k]
+                        local[others[0]] = s1 * size[others[0]]
+                        local[others[1]] = s2 * size[others[1]]
+                        points.append(centre + rot @ local)
+            else:
+                points.append(centre.copy())
+    return np.array(points, dtype=float).reshape(-1, 3)
+
+
+def support_polygon(
+    world: World, data: mujoco.MjData, from_contacts: bool, *, ground_tolerance: float = 0.01
+) -> FloatArray:
+    """Support polygon (V, 2), counter-clockwise: convex hull of the feet's ground contacts.
+
+    from_contacts: the positions of the physics contacts between foot geoms and the floor
+    (any non-robot geom when the world has no floor) in ``data.contact``.
+    Otherwise (planning): the foot geometry in ``data`` (needs its kinematics): box soles'
+    bottom-face corners, other foot geoms' centres; points higher than ``ground_tolerance``
+    above the floor (a lifted foot) are left out.
+    Raises ValueError when fewer than 3 non-collinear points remain.
+    """
+    feet = {g for geoms in world.ids.foot_geoms.values() for g in geoms}
+    if from_contacts:
+        floor = world.ids.floor_geom
+        robot = set(world.ids.robot_geoms)
+        pts = []
+        for i in range(data.ncon):
+            g1, g2 = int(data.contact.geom[i][0]), int(data.contact.geom[i][1])
+            other = g2 if g1 in feet else g1 if g2 in feet else None
+            if other is None or (other != floor if floor >= 0 else other in robot):
+                continue
+            pts.append(data.contact.pos[i][:2].copy())
+        xy = np.array(pts, dtype=float).reshape(-1, 2)
+        what = "physics contacts between the feet and the floor"
+    else:
+        p3 = _foot_points(world, data)
+        p3 = p3[p3[:, 2] <= _ground_height(world, data) + ground_tolerance]
+        xy = p3[:, :2]
+        what = "foot geometry points on the ground"
+    hull = convex_hull(xy)
+    if len(hull) < 3:
+        raise ValueError(f"support_polygon: {len(xy)} {what} do not span a polygon")
+    return hull
+
+
+# --- trajectory assessment --------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _FallKnot:
+    """One knot's fall facts (what assess_fall records per knot)."""
+
+    time: float
+    com: FloatArray  # (3,)
+    polygon: FloatArray  # (V, 2)
+    margin: float
+    seed_risk: float
+    probability: float
+    lower: float
+    upper: float
+    capture_margin: float
+
+
+def _com_covariance(uncertainty: Uncertainty) -> FloatArray:
+    return (uncertainty.com**2) * np.eye(2)
+
+
+def persistent_bias_probability(
+    polygons: list[FloatArray], means: ArrayLike, cov: ArrayLike
+) -> tuple[float, float]:
+    """P(fall) over knots when the CoM error e ~ N(0, cov) is one bias shared by every knot.
+
+    The motion fails iff mu_k + e leaves P_k at some knot k, i.e. iff e is outside
+    S = cap_k (P_k - mu_k), a convex polygon (clipped half-plane by half-plane). Returns
+    (exact P(e not in S), Boole upper bound over S's edges); (1, 1) when S is empty.
+    """
+    mus = np.asarray(means, dtype=float).reshape(len(polygons), -1)[:, :2]
+    if len(polygons) == 0:
+        raise ValueError("persistent_bias_probability: no polygons")
+    safe = _check_polygon(polygons[0]) - mus[0]
+    for poly, mu in zip(polygons[1:], mus[1:], strict=True):
+        a, b = halfplanes(poly)
+        for ai, bi in zip(a, b - a @ mu, strict=True):
+            safe = clip_polygon(safe, ai, float(bi))
+            if len(safe) < 3 or polygon_area(safe) <= 0.0:
+                return 1.0, 1.0
+    zero = np.zeros(2)
+    return probability_outside(safe, zero, cov), union_bounds(edge_probabilities(safe, zero, cov))[1]
+
+
+def assess_fall(
+    world: World, trajectory: Trajectory, risk_config: RiskConfig, uncertainty: Uncertainty
+) -> RiskReport:
+    """Fall risk of a trajectory on ``world``'s model (see the module doc for the formulas).
+
+    Per knot: the robot's CoM (recomputed with MuJoCo from the knot's qpos, robot bodies only),
+    the support polygon from the foot geometry, the signed margin, the seed's circle risk, the
+    exact and Boole probabilities that the true CoM (N(CoM, uncertainty.com^2 I)) is outside,
+    and the capture point's margin (finite-difference CoM velocity).
+    """
+    model = world.model
+    times = np.asarray(trajectory.times, dtype=float)
+    qpos = np.asarray(trajectory.qpos, dtype=float)
+    if qpos.ndim != 2 or qpos.shape[1] != model.nq or len(times) != len(qpos) or len(times) == 0:
+        raise ValueError(
+            f"assess_fall: trajectory '{trajectory.name}' has qpos {qpos.shape} and {len(times)} "
+            f"times; the world's model needs (K, {model.nq}) with K = len(times) >= 1"
+        )
+    cfg = risk_config.fall
+    radius = cfg.circle_radius if cfg.circle_radius is not None else cfg.sigmas * uncertainty.com
+    cov = _com_covariance(uncertainty)
+    data = mujoco.MjData(model)
+    base = world.ids.base_body
+    gravity = float(np.linalg.norm(model.opt.gravity))
+
+    count = len(times)
+    coms = np.zeros((count, 3))
+    polygons: list[FloatArray] = []
+    ground = 0.0
+    for k in range(count):
+        data.qpos[:] = qpos[k]
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        coms[k] = data.subtree_com[base]
+        polygons.append(support_polygon(world, data, from_contacts=False))
+        ground = _ground_height(world, data)
+    velocity = np.gradient(coms, times, axis=0) if count >= 2 else np.zeros_like(coms)
+
+    knots: list[_FallKnot] = []
+    for k in range(count):
+        poly, mu = polygons[k], coms[k, :2]
+        margin = signed_margin(poly, mu)
+        lower, upper = union_bounds(edge_probabilities(poly, mu, cov))
+        xi = capture_point(coms[k], velocity[k], gravity, ground)
+        knots.append(
+            _FallKnot(
+                time=float(times[k]),
+                com=coms[k].copy(),
+                polygon=poly,
+                margin=margin,
+                seed_risk=seed_fall_risk(margin, radius, cfg.exponent),
+                probability=probability_outside(poly, mu, cov),
+                lower=lower,
+                upper=upper,
+                capture_margin=signed_margin(poly, xi),
+            )
+        )
+
+    per_knot = np.array([kn.probability for kn in knots])
+    probability, boole = persistent_bias_probability(polygons, coms, cov)
+    worst = float(np.max(per_knot))
+    lower_bound = max(worst, max(kn.lower for kn in knots))
+    probability = float(np.clip(probability, lower_bound, max(boole, lower_bound)))
+
+    margins = np.array([kn.margin for kn in knots])
+    capture = np.array([kn.capture_margin for kn in knots])
+    seed = np.array([kn.seed_risk for kn in knots])
+    k_min, k_cap, k_worst = int(np.argmin(margins)), int(np.argmin(capture)), int(np.argmax(per_knot))
+    mismatch = (
+        float(np.max(np.linalg.norm(np.asarray(trajectory.com_path, dtype=float) - coms, axis=1)))
+        if np.shape(trajectory.com_path) == coms.shape
+        else float("nan")
+    )
+    return RiskReport(
+        mode="fall",
+        probability=probability,
+        probability_bounds=(lower_bound, max(boole, lower_bound)),
+        severity=float(risk_config.severity.fall),
+        seed_score=float(np.max(seed)),
+        times=times.copy(),
+        traces={
+            "margin": margins,
+            "seed_risk": seed,
+            "probability": per_knot,
+            "probability_lower": np.array([kn.lower for kn in knots]),
+            "probability_upper": np.array([kn.upper for kn in knots]),
+            "capture_margin": capture,
+            "com_x": coms[:, 0].copy(),
+            "com_y": coms[:, 1].copy(),
+        },
+        details={
+            "min_margin": float(margins[k_min]),
+            "min_margin_time": float(times[k_min]),
+            "min_capture_margin": float(capture[k_cap]),
+            "min_capture_margin_time": float(times[k_cap]),
+            "probability_worst_knot": worst,
+            "worst_knot_time": float(times[k_worst]),
+            "circle_radius": float(radius),
+            "com_sigma": float(uncertainty.com),
+            "com_path_mismatch": mismatch,
+            "support_area": polygon_area(polygons[k_min]),
+        },
+    )

@@ -1,0 +1,572 @@
+"""Grasp risk: the seed's logistic in the pre-grasp error, tolerance probabilities, grasp matrix.
+
+Sources (one line each):
+- Seed (Long et al. 2018, eq. 2): P_x = 1 / (1 + exp(-a x / (x_max - d) + b)), x = d = the
+  pre-grasp error (distance in m, or angle in rad); the weighted sum of the two is the seed risk.
+  Constants: b = GraspRiskConfig.steepness, and a = b (x_max - s) / s so that P(s) = 1/2 at
+  the configured scale s. Guard: d >= x_max gives 1 (the limit of the formula as d -> x_max).
+  Note the seed's form is 1 / (1 + e^b) > 0 at zero error.
+- Tolerance failure: P(|e| > t), e ~ N(mu, s^2) = Phi(-(t + mu)/s) + Phi(-(t - mu)/s); the axes
+  (closing, lateral, yaw) fail independently: P = 1 - prod(1 - p_axis), with Boole bounds.
+- Grasp matrix (Prattichizzo & Trinkle, Springer Handbook of Robotics, 2nd ed., ch. 38 "Grasping"
+  (ch. 28 in the 1st ed.); Murray, Li & Sastry 1994, ch. 5): G_i = [[R_i, 0], [S(p_i - c) R_i, R_i]]
+  maps contact i's wrench in its frame (columns of R_i: normal into the object, two tangents)
+  to the object wrench about c; contact models keep the columns: frictionless point [f_n],
+  hard finger = point contact with friction [f_n, f_t, f_o], soft finger [f_n, f_t, f_o, m_n].
+- Quality: sigma_min(G) (Li & Sastry 1988) and isotropy sigma_min / sigma_max (Kim et al. 2004;
+  the inverse of the condition number the seed's Q relates to).
+- Shake validation (DESIGN.md, "Grasp"; the seed's sinusoidal excitation): oscillate the wrist
+  servos' targets q0 + A sin(2 pi f t) and watch the object in the hand frame.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Literal, NamedTuple
+
+import mujoco
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.special import expit
+
+from executive.planning_timing import Trajectory
+from executive.risk.gaussian import exceed_probability, gauss_hermite_normal, independent_union, union_bounds
+from executive.risk.report import RiskReport
+from executive.scenario_types import GraspRiskConfig, RiskConfig, Uncertainty
+from executive.world import World
+
+__all__ = [
+    "CONTACT_MODELS",
+    "GraspError",
+    "GraspQuality",
+    "GraspTolerance",
+    "ShakeResult",
+    "assess_grasp",
+    "expected_seed_risk",
+    "grasp_error",
+    "grasp_from_physics",
+    "grasp_matrix",
+    "grasp_quality",
+    "grasp_tolerance",
+    "hand_pose_at",
+    "logistic_risk",
+    "seed_grasp_risk",
+    "shake_test",
+    "skew",
+    "tolerance_probabilities",
+]
+
+FloatArray = NDArray[np.float64]
+ContactModel = Literal["frictionless", "hard_finger", "point_with_friction", "soft_finger"]
+#: Columns of the contact-frame wrench (f_n, f_t, f_o, m_n, m_t, m_o) each contact model transmits.
+CONTACT_MODELS: dict[str, tuple[int, ...]] = {
+    "frictionless": (0,),
+    "hard_finger": (0, 1, 2),
+    "point_with_friction": (0, 1, 2),  # the Handbook's name for the hard-finger model
+    "soft_finger": (0, 1, 2, 3),
+}
+
+
+# --- the seed's logistic --------------------------------------------------------------------
+
+
+def logistic_risk(error: float, scale: float, x_max: float, steepness: float) -> float:
+    """Seed eq. 2 for one error: 1 / (1 + exp(-a d / (x_max - d) + b)), guarded.
+
+    d = |error|; b = steepness; a = b (x_max - scale) / scale (risk 1/2 at d = scale).
+    d >= x_max (including inf) gives 1. Needs 0 < scale < x_max and steepness > 0.
+    """
+    if not (0.0 < scale < x_max) or not steepness > 0.0 or not np.isfinite(x_max):
+        raise ValueError(
+            f"logistic_risk: need 0 < scale < x_max < inf and steepness > 0, got scale={scale}, "
+            f"x_max={x_max}, steepness={steepness}"
+        )
+    if np.isnan(error):
+        raise ValueError("logistic_risk: the error is NaN")
+    d = abs(float(error))
+    if d >= x_max:
+        return 1.0
+    a = steepness * (x_max - scale) / scale
+    z = a * d / (x_max - d) - steepness  # x_max - d > 0 here; may be huge near x_max
+    return float(expit(z))
+
+
+def seed_grasp_risk(position_error: float, angle_error: float, config: GraspRiskConfig) -> float:
+    """The seed's weighted sum of the positional (m) and angular (rad) logistic risks, in [0, 1]."""
+    total = config.position_weight + config.angle_weight
+    if config.position_weight < 0.0 or config.angle_weight < 0.0 or total <= 0.0:
+        raise ValueError(
+            f"seed_grasp_risk: weights must be >= 0 with a positive sum, got "
+            f"{config.position_weight}, {config.angle_weight}"
+        )
+    rp = logistic_risk(position_error, config.position_scale, config.position_max, config.steepness)
+    ra = logistic_risk(angle_error, config.angle_scale_rad, config.angle_max_rad, config.steepness)
+    return float(np.clip((config.position_weight * rp + config.angle_weight * ra) / total, 0.0, 1.0))
+
+
+# --- pre-grasp error and tolerances ---------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class GraspError:
+    """Where the object's grasp point is relative to the hand at grasp time (horizontal).
+
+    closing: m, along the horizontal projection of the hand's closing axis (site y);
+    lateral: m, horizontal and perpendicular to it; yaw: rad, in (-pi/2, pi/2], the rotation
+    of the object's closing axis relative to the hand's (0 for an axisymmetric object).
+    """
+
+    closing: float
+    lateral: float
+    yaw: float
+
+    @property
+    def translational(self) -> float:
+        return float(np.hypot(self.closing, self.lateral))
+
+
+@dataclass(frozen=True)
+class GraspTolerance:
+    """Largest |error| per axis that a grasp survives (m, m, rad); see :func:`grasp_tolerance`."""
+
+    closing: float
+    lateral: float
+    yaw: float
+
+
+def _wrap_half_pi(angle: float) -> float:
+    """Angle modulo pi into (-pi/2, pi/2] (a jaw's closing axis is a line, not a direction)."""
+    wrapped = float(np.mod(angle + np.pi / 2.0, np.pi) - np.pi / 2.0)
+    return np.pi / 2.0 if wrapped == -np.pi / 2.0 else wrapped
+
+
+def _horizontal_axes(hand_rotation: FloatArray) -> tuple[FloatArray, FloatArray]:
+    y = np.array(hand_rotation[:, 1], dtype=float)
+    y[2] = 0.0
+    norm = float(np.linalg.norm(y))
+    if norm < 1e-9:
+        raise ValueError("grasp_error: the hand's closing axis (site y) is vertical")
+    y /= norm
+    return y, np.array([y[1], -y[0], 0.0])  # closing, lateral = closing x z
+
+
+def grasp_error(
+    hand_position: ArrayLike,
+    hand_rotation: ArrayLike,
+    object_position: ArrayLike,
+    object_rotation: ArrayLike,
+    *,
+    closing_axis_object: ArrayLike = (0.0, 1.0, 0.0),
+    axisymmetric: bool = False,
+) -> GraspError:
+    """Pre-grasp error of a hand pose (site position, rotation with columns x y z) vs an object pose.
+
+    The object's grasp point is its centre; ``closing_axis_object`` is the object-frame axis
+    the jaws should close along (the book's width, y).
+    """
+    hp = np.asarray(hand_position, dtype=float).reshape(3)
+    hr = np.asarray(hand_rotation, dtype=float).reshape(3, 3)
+    op = np.asarray(object_position, dtype=float).reshape(3)
+    orot = np.asarray(object_rotation, dtype=float).reshape(3, 3)
+    closing, lateral = _horizontal_axes(hr)
+    offset = op - hp
+    offset[2] = 0.0
+    yaw = 0.0
+    if not axisymmetric:
+        axis = orot @ np.asarray(closing_axis_object, dtype=float).reshape(3)
+        if np.hypot(axis[0], axis[1]) > 1e-9:
+            yaw = _wrap_half_pi(float(np.arctan2(axis[1], axis[0]) - np.arctan2(closing[1], closing[0])))
+    return GraspError(float(offset @ closing), float(offset @ lateral), yaw)
+
+
+def _half_extent(model: mujoco.MjModel, geom: int, axis_local: FloatArray) -> float:
+    """Half the extent of a geom along a unit axis of its own frame."""
+    size = model.geom_size[geom]
+    kind = int(model.geom_type[geom])
+    if kind == mujoco.mjtGeom.mjGEOM_BOX:
+        return float(np.abs(axis_local) @ size)
+    if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+        return float(size[0])
+    if kind == mujoco.mjtGeom.mjGEOM_CYLINDER:  # axis z, radius size[0], half length size[1]
+        return float(size[0] * np.hypot(axis_local[0], axis_local[1]) + size[1] * abs(axis_local[2]))
+    return float(model.geom_rbound[geom])
+
+
+def _is_axisymmetric(model: mujoco.MjModel, geom: int, rotation: FloatArray) -> bool:
+    kind = int(model.geom_type[geom])
+    if kind == mujoco.mjtGeom.mjGEOM_SPHERE:
+        return True
+    return kind == mujoco.mjtGeom.mjGEOM_CYLINDER and abs(float(rotation[2, 2])) > 0.99
+
+
+def grasp_tolerance(
+    world: World,
+    side: str,
+    obj: str,
+    *,
+    jaw_opening: float | None = None,
+    closing_axis_object: ArrayLike = (0.0, 1.0, 0.0),
+) -> GraspTolerance:
+    """Geometric tolerances of a parallel-jaw grasp of ``obj`` by the ``side`` hand.
+
+    closing: (jaw opening - object width) / 2, the jaw clearance; lateral: half the object's
+    extent across the jaws (the pads must land on it); yaw: the largest rotation at which the
+    object still fits between the open jaws, w cos t + L sin t <= opening (pi/2 if it always
+    fits, 0 if it never does). jaw_opening None: the sum over the gripper's actuators of
+    (open - closed), valid when they drive slide joints measured from touching pads (the
+    bundled humanoid: 2 x 0.085 m); other hands need an explicit value.
+    """
+    model = world.model
+    if side not in world.profile.arms:
+        raise ValueError(f"grasp_tolerance: no arm '{side}'; the profile has {sorted(world.profile.arms)}")
+    if obj not in world.ids.object_geoms:
+        raise ValueError(f"grasp_tolerance: no object '{obj}'; objects: {sorted(world.ids.object_geoms)}")
+    if jaw_opening is None:
+        grip = world.profile.arms[side].gripper
+        acts = world.ids.gripper_actuators[side]
+        joints = [int(model.actuator_trnid[a, 0]) for a in acts]
+        if not acts or any(
+            model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT
+            or model.jnt_type[j] != mujoco.mjtJoint.mjJNT_SLIDE
+            for a, j in zip(acts, joints, strict=True)
+        ):
+            raise ValueError(
+                f"grasp_tolerance: the {side} gripper's actuators do not all drive slide joints; "
+                "give jaw_opening (m) explicitly"
+            )
+        jaw_opening = float(sum(abs(o - c) for o, c in zip(grip.open, grip.closed, strict=True)))
+    geom = world.ids.object_geoms[obj]
+    c_axis = np.asarray(closing_axis_object, dtype=float).reshape(3)
+    c_axis = c_axis / np.linalg.norm(c_axis)
+    l_axis = np.cross(c_axis, np.array([0.0, 0.0, 1.0]))
+    if np.linalg.norm(l_axis) < 1e-9:
+        l_axis = np.array([1.0, 0.0, 0.0])
+    l_axis /= np.linalg.norm(l_axis)
+    width = 2.0 * _half_extent(model, geom, c_axis)
+    length = 2.0 * _half_extent(model, geom, l_axis)
+    rot = world.data.geom_xmat[geom].reshape(3, 3)
+    if _is_axisymmetric(model, geom, rot):
+        yaw = np.pi / 2.0 if width <= jaw_opening else 0.0
+    elif width > jaw_opening:
+        yaw = 0.0
+    else:
+        diag = float(np.hypot(width, length))
+        yaw = (
+            np.pi / 2.0
+            if diag <= jaw_opening
+            else float(np.arctan2(length, width) - np.arccos(jaw_opening / diag))
+        )
+    return GraspTolerance(closing=(jaw_opening - width) / 2.0, lateral=length / 2.0, yaw=float(yaw))
+
+
+def tolerance_probabilities(
+    error: GraspError, tolerance: GraspTolerance, position_sigma: float, yaw_sigma: float
+) -> FloatArray:
+    """Per-axis P(|error| > tolerance) (closing, lateral, yaw) with Gaussian object pose errors.
+
+    The object position error is isotropic in the horizontal plane (sigma per axis), so in
+    the hand's horizontal axes it is again N(0, sigma^2) per axis, independent.
+    """
+    means = np.array([error.closing, error.lateral, error.yaw])
+    tols = np.array([tolerance.closing, tolerance.lateral, tolerance.yaw])
+    sigmas = np.array([position_sigma, position_sigma, yaw_sigma])
+    return exceed_probability(tols, sigmas, means)
+
+
+def expected_seed_risk(
+    error: GraspError, config: GraspRiskConfig, position_sigma: float, yaw_sigma: float, order: int = 32
+) -> float:
+    """E[seed risk] over the object pose error (Gauss-Hermite in closing, lateral and yaw)."""
+    z, w = gauss_hermite_normal(order)
+    closing = error.closing + position_sigma * z
+    lateral = error.lateral + position_sigma * z
+    yaw = error.yaw + yaw_sigma * z
+    pos_risk = np.array(
+        [
+            [
+                logistic_risk(
+                    float(np.hypot(c, lat)), config.position_scale, config.position_max, config.steepness
+                )
+                for lat in lateral
+            ]
+            for c in closing
+        ]
+    )
+    ang_risk = np.array(
+        [logistic_risk(float(a), config.angle_scale_rad, config.angle_max_rad, config.steepness) for a in yaw]
+    )
+    total = config.position_weight + config.angle_weight
+    expected = (
+        config.position_weight * float(w @ pos_risk @ w) + config.angle_weight * float(w @ ang_risk)
+    ) / total
+    return float(np.clip(expected, 0.0, 1.0))
+
+
+def hand_pose_at(
+    world: World, trajectory: Trajectory, side: str, knot: int = -1
+) -> tuple[FloatArray, FloatArray]:
+    """The ``side`` hand site's world position and rotation at a knot of a trajectory (default the last)."""
+    data = mujoco.MjData(world.model)
+    data.qpos[:] = trajectory.qpos[knot]
+    mujoco.mj_kinematics(world.model, data)
+    site = world.ids.hand_sites[side]
+    return data.site_xpos[site].copy(), data.site_xmat[site].reshape(3, 3).copy()
+
+
+def assess_grasp(
+    world: World,
+    side: str,
+    obj: str,
+    hand_pose: tuple[ArrayLike, ArrayLike],
+    risk_config: RiskConfig,
+    uncertainty: Uncertainty,
+    *,
+    object_pose: tuple[ArrayLike, ArrayLike] | None = None,
+    tolerance: GraspTolerance | None = None,
+    closing_axis_object: ArrayLike = (0.0, 1.0, 0.0),
+) -> RiskReport:
+    """Grasp risk of closing the ``side`` hand at ``hand_pose`` (site position, 3x3 rotation) on ``obj``.
+
+    object_pose: (position, quaternion w x y z) of the object; None takes its pose in
+    ``world.data``. Pass the truth pose with a zero ``Uncertainty()`` to score a known error
+    (probability 0 or 1); with the estimate's pose and the scenario's uncertainty, the
+    object's position (per horizontal axis) and yaw are Gaussian about it.
+    probability: 1 - prod(1 - p_axis) over the closing, lateral and yaw tolerances
+    (independent axes), bounds max p <= P <= min(1, sum p); seed_score: the expected seed
+    risk (eq. 2 weighted sum); severity: ``risk_config.severity.drop``.
+    """
+    if object_pose is None:
+        position, quat = world.object_pose(obj)
+    else:
+        position = np.asarray(object_pose[0], dtype=float).reshape(3)
+        quat = np.asarray(object_pose[1], dtype=float).reshape(4)
+    rotation = np.zeros(9)
+    mujoco.mju_quat2Mat(rotation, quat / np.linalg.norm(quat))
+    rotation_m = rotation.reshape(3, 3)
+    geom = world.ids.object_geoms[obj]
+    err = grasp_error(
+        hand_pose[0],
+        hand_pose[1],
+        position,
+        rotation_m,
+        closing_axis_object=closing_axis_object,
+        axisymmetric=_is_axisymmetric(world.model, geom, rotation_m),
+    )
+    tol = tolerance or grasp_tolerance(world, side, obj, closing_axis_object=closing_axis_object)
+    p_axes = tolerance_probabilities(err, tol, uncertainty.object_position, uncertainty.object_yaw_rad)
+    lower, upper = union_bounds(p_axes)
+    cfg = risk_config.grasp
+    return RiskReport(
+        mode="grasp",
+        probability=float(np.clip(independent_union(p_axes), lower, upper)),
+        probability_bounds=(lower, upper),
+        severity=float(risk_config.severity.drop),
+        seed_score=expected_seed_risk(err, cfg, uncertainty.object_position, uncertainty.object_yaw_rad),
+        details={
+            "side": side,
+            "object": obj,
+            "closing_error": err.closing,
+            "lateral_error": err.lateral,
+            "yaw_error": err.yaw,
+            "translational_error": err.translational,
+            "seed_risk_nominal": seed_grasp_risk(err.translational, err.yaw, cfg),
+            "closing_tolerance": tol.closing,
+            "lateral_tolerance": tol.lateral,
+            "yaw_tolerance": tol.yaw,
+            "p_closing": float(p_axes[0]),
+            "p_lateral": float(p_axes[1]),
+            "p_yaw": float(p_axes[2]),
+        },
+    )
+
+
+# --- grasp matrix ---------------------------------------------------------------------------
+
+
+def skew(v: ArrayLike) -> FloatArray:
+    """S(v) with S(v) x = v x x."""
+    x, y, z = np.asarray(v, dtype=float).reshape(3)
+    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+
+
+def grasp_matrix(
+    contact_points: ArrayLike,
+    contact_frames: ArrayLike,
+    object_centre: ArrayLike,
+    model: ContactModel = "hard_finger",
+) -> FloatArray:
+    """Grasp matrix G (6 x m): object wrench about the centre = G @ stacked contact wrenches.
+
+    contact_frames[i] is R_i, columns (normal into the object, tangent, tangent) in the world;
+    G_i = [[R_i, 0], [S(p_i - c) R_i, R_i]] with the contact model's columns kept.
+    """
+    if model not in CONTACT_MODELS:
+        raise ValueError(
+            f"grasp_matrix: contact model must be one of {sorted(CONTACT_MODELS)}, got {model!r}"
+        )
+    points = np.asarray(contact_points, dtype=float).reshape(-1, 3)
+    frames = np.asarray(contact_frames, dtype=float).reshape(-1, 3, 3)
+    if len(points) != len(frames):
+        raise ValueError(f"grasp_matrix: {len(points)} points but {len(frames)} frames")
+    centre = np.asarray(object_centre, dtype=float).reshape(3)
+    cols = list(CONTACT_MODELS[model])
+    blocks = []
+    for p, rot in zip(points, frames, strict=True):
+        full = np.zeros((6, 6))
+        full[:3, :3] = rot
+        full[3:, :3] = skew(p - centre) @ rot
+        full[3:, 3:] = rot
+        blocks.append(full[:, cols])
+    return np.hstack(blocks) if blocks else np.zeros((6, 0))
+
+
+@dataclass(frozen=True)
+class GraspQuality:
+    """A grasp's contacts, its grasp matrix and the singular-value measures of it."""
+
+    points: FloatArray  # (n, 3)
+    frames: FloatArray  # (n, 3, 3), columns normal (into the object), tangents
+    matrix: FloatArray  # (6, m)
+    singular_values: FloatArray  # (6,), descending, zero-padded when m < 6
+    sigma_min: float
+    isotropy: float  # sigma_min / sigma_max (0 for no contacts)
+
+    @property
+    def contacts(self) -> int:
+        return len(self.points)
+
+
+def grasp_quality(
+    contact_points: ArrayLike,
+    contact_frames: ArrayLike,
+    object_centre: ArrayLike,
+    model: ContactModel = "hard_finger",
+) -> GraspQuality:
+    """Grasp matrix and its measures: sigma_min(G) and the isotropy sigma_min / sigma_max."""
+    points = np.asarray(contact_points, dtype=float).reshape(-1, 3)
+    frames = np.asarray(contact_frames, dtype=float).reshape(-1, 3, 3)
+    g = grasp_matrix(points, frames, object_centre, model)
+    sv = np.zeros(6)
+    if g.shape[1]:
+        s = np.linalg.svd(g, compute_uv=False)
+        sv[: len(s)] = s
+    sigma_max = float(sv[0])
+    return GraspQuality(
+        points=points,
+        frames=frames,
+        matrix=g,
+        singular_values=sv,
+        sigma_min=float(sv[-1]),
+        isotropy=float(sv[-1] / sigma_max) if sigma_max > 0.0 else 0.0,
+    )
+
+
+def grasp_from_physics(
+    world: World, data: mujoco.MjData, side: str, obj: str, model: ContactModel = "hard_finger"
+) -> GraspQuality:
+    """Grasp quality of the current contacts between the ``side`` hand's geoms and ``obj``'s geom.
+
+    MuJoCo's contact frame rows are (normal, tangent, tangent) with the normal pointing from
+    geom1 to geom2; it is flipped (with one tangent, keeping a right-handed frame) so the
+    normal points into the object. The centre is the object's centre of mass (data.xipos).
+    """
+    hand = set(world.ids.hand_bodies[side])
+    obj_geom = world.ids.object_geoms[obj]
+    gbody = world.model.geom_bodyid
+    points, frames = [], []
+    for i in range(data.ncon):
+        g1, g2 = int(data.contact.geom[i][0]), int(data.contact.geom[i][1])
+        if g2 == obj_geom and int(gbody[g1]) in hand:
+            sign = 1.0
+        elif g1 == obj_geom and int(gbody[g2]) in hand:
+            sign = -1.0
+        else:
+            continue
+        rows = data.contact.frame[i].reshape(3, 3)
+        rot = np.column_stack([sign * rows[0], sign * rows[1], rows[2]])
+        points.append(data.contact.pos[i].copy())
+        frames.append(rot)
+    centre = data.xipos[world.ids.object_bodies[obj]]
+    return grasp_quality(np.array(points).reshape(-1, 3), np.array(frames).reshape(-1, 3, 3), centre, model)
+
+
+# --- shake validation -----------------------------------------------------------------------
+
+
+class ShakeResult(NamedTuple):
+    """Outcome of :func:`shake_test`: whether the object stayed in the hand, and its largest drift (m)."""
+
+    held: bool
+    drift_m: float
+
+
+def _actuator_of(model: mujoco.MjModel, joint: int) -> int:
+    for a in range(model.nu):
+        if (
+            model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
+            and int(model.actuator_trnid[a, 0]) == joint
+        ):
+            return a
+    name = mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_JOINT, joint)
+    raise ValueError(f"shake_test: joint '{name}' has no actuator")
+
+
+def shake_test(
+    world: World,
+    side: str,
+    obj: str,
+    *,
+    amplitude_rad: float,
+    frequency_hz: float,
+    duration_s: float,
+    tolerance: float = 0.02,
+    joints: tuple[str, ...] | None = None,
+) -> ShakeResult:
+    """Shake a grasped object by oscillating the wrist servos' targets; steps ``world.data``.
+
+    The caller has the object grasped in ``world.data``. Each joint's position actuator
+    target becomes q0 + amplitude sin(2 pi f t) (clipped to its ctrlrange) for
+    ``duration_s``; drift_m is the largest displacement of the object's centre in the hand
+    site's frame from where it was at the start; held = drift_m <= tolerance. joints None:
+    the arm's last two joints (the wrist). Targets are restored at the end.
+    """
+    if amplitude_rad < 0.0 or frequency_hz <= 0.0 or duration_s <= 0.0 or tolerance <= 0.0:
+        raise ValueError(
+            "shake_test: need amplitude >= 0, frequency > 0, duration > 0 and tolerance > 0, got "
+            f"{amplitude_rad}, {frequency_hz}, {duration_s}, {tolerance}"
+        )
+    model, data = world.model, world.data
+    names = joints if joints is not None else world.profile.arms[side].joints[-2:]
+    acts = []
+    for name in names:
+        j = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)
+        if j < 0:
+            raise ValueError(f"shake_test: no joint '{name}' in the model")
+        acts.append(_actuator_of(model, int(j)))
+    act_idx = np.array(acts, dtype=int)
+    ctrl0 = data.ctrl[act_idx].copy()
+    lo, hi = model.actuator_ctrlrange[act_idx, 0], model.actuator_ctrlrange[act_idx, 1]
+    limited = model.actuator_ctrllimited[act_idx].astype(bool)
+    site = world.ids.hand_sites[side]
+    body = world.ids.object_bodies[obj]
+    mujoco.mj_forward(model, data)
+
+    def in_hand() -> FloatArray:
+        rot = data.site_xmat[site].reshape(3, 3)
+        return np.asarray(rot.T @ (data.xpos[body] - data.site_xpos[site]), dtype=float)
+
+    reference = in_hand()
+    t0 = float(data.time)
+    steps = round(duration_s / model.opt.timestep)
+    drift = 0.0
+    try:
+        for _ in range(steps):
+            target = ctrl0 + amplitude_rad * np.sin(2.0 * np.pi * frequency_hz * (data.time - t0))
+            data.ctrl[act_idx] = np.where(limited, np.clip(target, lo, hi), target)
+            mujoco.mj_step(model, data)
+            drift = max(drift, float(np.linalg.norm(in_hand() - reference)))
+            if not np.isfinite(drift):
+                break
+    finally:
+        data.ctrl[act_idx] = ctrl0
+    return ShakeResult(held=bool(np.isfinite(drift) and drift <= tolerance), drift_m=float(drift))

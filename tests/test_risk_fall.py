@@ -1,0 +1,312 @@
+"""Fall risk: support polygon geometry, CoM-outside probabilities, capture point, trajectories.
+
+Reference values are derived independently in each test (product formulas for a centred
+rectangle, hand-computed distances, Monte Carlo sampling), not taken from the module.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import warnings
+
+import mujoco
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from scipy.special import ndtr
+
+from executive.planning_timing import Trajectory
+from executive.risk.fall import (
+    assess_fall,
+    capture_point,
+    clip_polygon,
+    convex_hull,
+    edge_probabilities,
+    halfplanes,
+    persistent_bias_probability,
+    polygon_area,
+    probability_outside,
+    probability_outside_mc,
+    seed_fall_risk,
+    signed_margin,
+    support_polygon,
+)
+from executive.scenario import load
+from executive.scenario_types import FallRiskConfig, RiskConfig, Uncertainty
+from executive.world import World, build
+
+# Rectangle +-0.10 x +-0.05 m, counter-clockwise.
+RECT = np.array([[-0.10, -0.05], [0.10, -0.05], [0.10, 0.05], [-0.10, 0.05]])
+SIGMA = 0.03
+
+
+def _hexagon() -> np.ndarray:
+    """An irregular convex hexagon (counter-clockwise), a foot-print-like shape."""
+    return np.array([[-0.12, -0.04], [0.02, -0.09], [0.13, -0.05], [0.15, 0.03], [0.04, 0.10], [-0.10, 0.06]])
+
+
+# ----------------------------------------------------------------------------- probabilities
+
+
+def test_centred_rectangle_exact_and_boole() -> None:
+    cov = SIGMA**2 * np.eye(2)
+    # Independent axes: P(inside) = P(|X| < 0.10) P(|Y| < 0.05), P(|X| < t) = 1 - 2 Phi(-t / sigma).
+    expected = 1.0 - (1.0 - 2.0 * ndtr(-0.10 / SIGMA)) * (1.0 - 2.0 * ndtr(-0.05 / SIGMA))
+    exact = probability_outside(RECT, [0.0, 0.0], cov)
+    quad = probability_outside(RECT, [0.0, 0.0], cov, method="quadrature")
+    print(f"exact (Owen's T) {exact:.10f}, quadrature {quad:.10f}, product formula {expected:.10f}")
+    assert exact == pytest.approx(0.09636, abs=1e-3)
+    assert exact == pytest.approx(expected, abs=1e-10)
+    assert quad == pytest.approx(expected, abs=1e-10)
+    # Boole: two edges at 0.10 and two at 0.05: 2 Phi(-10/3) + 2 Phi(-5/3).
+    p = edge_probabilities(RECT, [0.0, 0.0], cov)
+    boole = float(np.sum(p))
+    assert boole == pytest.approx(2.0 * ndtr(-0.10 / SIGMA) + 2.0 * ndtr(-0.05 / SIGMA), abs=1e-12)
+    assert boole == pytest.approx(0.09644, abs=1e-4)
+    assert float(np.max(p)) <= exact <= boole
+    print(f"Boole {boole:.6f}, max edge {np.max(p):.6f}")
+
+
+def test_hexagon_correlated_exact_matches_monte_carlo() -> None:
+    poly = _hexagon()
+    mean = np.array([0.05, 0.02])
+    cov = np.array([[0.04**2, 0.6 * 0.04 * 0.025], [0.6 * 0.04 * 0.025, 0.025**2]])
+    exact = probability_outside(poly, mean, cov)
+    quad = probability_outside(poly, mean, cov, method="quadrature")
+    mc = probability_outside_mc(poly, mean, cov, np.random.default_rng(0), 1_000_000)
+    p = edge_probabilities(poly, mean, cov)
+    print(
+        f"hexagon: exact {exact:.6f}, quadrature {quad:.6f}, MC {mc.probability:.6f} +- {mc.stderr:.6f}, "
+        f"Boole [{np.max(p):.6f}, {min(1.0, p.sum()):.6f}]"
+    )
+    assert quad == pytest.approx(exact, abs=1e-9)
+    assert abs(exact - mc.probability) < 3.0 * mc.stderr
+    assert float(np.max(p)) <= exact <= min(1.0, float(np.sum(p)))
+
+
+@pytest.mark.parametrize("mean", [(0.10, 0.0), (0.10, 0.05), (0.3, 0.2), (-0.02, 0.049)])
+def test_mean_on_or_beyond_the_boundary(mean: tuple[float, float]) -> None:
+    cov = SIGMA**2 * np.eye(2)
+    # Independent axes again, now off-centre: P(inside) = prod (Phi((hi - m)/s) - Phi((lo - m)/s)).
+    px = ndtr((0.10 - mean[0]) / SIGMA) - ndtr((-0.10 - mean[0]) / SIGMA)
+    py = ndtr((0.05 - mean[1]) / SIGMA) - ndtr((-0.05 - mean[1]) / SIGMA)
+    assert probability_outside(RECT, mean, cov) == pytest.approx(1.0 - px * py, abs=1e-10)
+    assert probability_outside(RECT, mean, cov, method="quadrature") == pytest.approx(1.0 - px * py, abs=1e-9)
+
+
+def test_zero_covariance_is_an_indicator() -> None:
+    zero = np.zeros((2, 2))
+    assert probability_outside(RECT, [0.0, 0.0], zero) == 0.0
+    assert probability_outside(RECT, [0.2, 0.0], zero) == 1.0
+    np.testing.assert_array_equal(edge_probabilities(RECT, [0.2, 0.0], zero), [0.0, 1.0, 0.0, 0.0])
+
+
+def test_persistent_bias_over_knots() -> None:
+    """One bias e, two knots at +-0.05 m in x: safe iff |e_x| < 0.05 and |e_y| < 0.05."""
+    cov = SIGMA**2 * np.eye(2)
+    exact, upper = persistent_bias_probability([RECT, RECT], [[0.05, 0.0], [-0.05, 0.0]], cov)
+    inside_1d = 1.0 - 2.0 * ndtr(-0.05 / SIGMA)
+    assert exact == pytest.approx(1.0 - inside_1d**2, abs=1e-10)
+    worst = probability_outside(RECT, [0.05, 0.0], cov)
+    assert exact > worst + 0.03  # two-sided motion: more than the worst knot
+    assert exact <= upper
+    # Nested case (same knot twice): exactly the knot's probability.
+    same, _ = persistent_bias_probability([RECT, RECT], [[0.05, 0.0], [0.05, 0.0]], cov)
+    assert same == pytest.approx(worst, abs=1e-12)
+
+
+# ----------------------------------------------------------------------------- geometry
+
+
+def test_halfplanes_of_the_rectangle() -> None:
+    a, b = halfplanes(RECT)
+    np.testing.assert_allclose(a, [[0, -1], [1, 0], [0, 1], [-1, 0]], atol=1e-15)
+    np.testing.assert_allclose(b, [0.05, 0.10, 0.05, 0.10], atol=1e-15)
+
+
+def test_signed_margin_hand_values() -> None:
+    # Inside at (0.02, 0.01): distances to the edges x=0.10: 0.08, x=-0.10: 0.12, y=0.05: 0.04, y=-0.05: 0.06.
+    assert signed_margin(RECT, [0.02, 0.01]) == pytest.approx(0.04, abs=1e-15)
+    assert signed_margin(RECT, [0.0, 0.0]) == pytest.approx(0.05, abs=1e-15)
+    # Outside near the edge x = 0.10, within its span: -(0.12 - 0.10).
+    assert signed_margin(RECT, [0.12, 0.01]) == pytest.approx(-0.02, abs=1e-15)
+    # Outside near the vertex (0.10, 0.05): -sqrt(0.03^2 + 0.04^2) = -0.05 (not -0.04 to the line y = 0.05).
+    assert signed_margin(RECT, [0.13, 0.09]) == pytest.approx(-0.05, abs=1e-15)
+    # On the boundary.
+    assert signed_margin(RECT, [0.10, 0.0]) == pytest.approx(0.0, abs=1e-15)
+    # A triangle (0,0), (1,0), (0,1): at the centroid the hypotenuse x + y = 1 is nearest,
+    # (1 - 2/3)/sqrt 2 = 0.2357 < 1/3 (the legs).
+    tri = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    assert signed_margin(tri, [1 / 3, 1 / 3]) == pytest.approx((1 / 3) / math.sqrt(2.0), abs=1e-12)
+    assert signed_margin(tri, [0.45, 0.45]) == pytest.approx((1.0 - 0.9) / math.sqrt(2.0), abs=1e-12)
+
+
+# Coordinates in metres on a 1 nm grid (the hull treats turns below 1e-12 extent^2 as straight).
+_COORD = st.floats(-1.0, 1.0, allow_nan=False).map(lambda v: round(v, 9))
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.lists(st.tuples(_COORD, _COORD), min_size=3, max_size=40))
+def test_convex_hull_contains_all_points_and_is_convex(points: list[tuple[float, float]]) -> None:
+    pts = np.array(points)
+    hull = convex_hull(pts)
+    # Every hull vertex is one of the points.
+    assert all(np.any(np.all(pts == v, axis=1)) for v in hull)
+    if len(hull) < 3:
+        # Degenerate input: all points on one line through the (at most 2) extremes.
+        if len(hull) == 2:
+            d = hull[1] - hull[0]
+            cross = d[0] * (pts[:, 1] - hull[0, 1]) - d[1] * (pts[:, 0] - hull[0, 0])
+            assert np.all(np.abs(cross) <= 1e-9)
+        return
+    # Strictly convex and counter-clockwise: every turn is a left turn.
+    nxt, nxt2 = np.roll(hull, -1, axis=0), np.roll(hull, -2, axis=0)
+    turns = (nxt[:, 0] - hull[:, 0]) * (nxt2[:, 1] - hull[:, 1]) - (nxt[:, 1] - hull[:, 1]) * (
+        nxt2[:, 0] - hull[:, 0]
+    )
+    assert np.all(turns > 0.0)
+    assert polygon_area(hull) > 0.0
+    # Every point is inside or on the boundary.
+    assert min(signed_margin(hull, p) for p in pts) >= -1e-9
+
+
+def test_clip_polygon_half_plane() -> None:
+    clipped = clip_polygon(RECT, [1.0, 0.0], 0.0)  # keep x <= 0
+    assert polygon_area(clipped) == pytest.approx(0.10 * 0.10, abs=1e-15)
+    assert clip_polygon(RECT, [1.0, 0.0], -0.2).shape == (0, 2)
+    np.testing.assert_array_equal(clip_polygon(RECT, [1.0, 0.0], 0.2), RECT)
+
+
+# ----------------------------------------------------------------------------- seed and capture point
+
+
+def test_seed_circle_risk() -> None:
+    r, b = 0.04, 2.0
+    assert seed_fall_risk(0.05, r, b) == 0.0  # circle inside
+    assert seed_fall_risk(r, r, b) == 0.0  # circle touches the edge
+    assert seed_fall_risk(0.0, r, b) == pytest.approx(0.25)  # half out: (1/2)^2
+    assert seed_fall_risk(-r, r, b) == pytest.approx(1.0)  # entirely out
+    assert seed_fall_risk(-1.0, r, b) == 1.0
+    assert seed_fall_risk(-0.001, 0.0, b) == 1.0 and seed_fall_risk(0.001, 0.0, b) == 0.0
+    values = [seed_fall_risk(m, r, b) for m in np.linspace(0.06, -0.06, 50)]
+    assert all(x <= y for x, y in itertools.pairwise(values))
+
+
+def test_capture_point() -> None:
+    com = np.array([0.03, -0.01, 0.9])
+    np.testing.assert_array_equal(capture_point(com, np.zeros(3)), com[:2])
+    # omega = sqrt(9.81 / 0.9) = 3.3015 1/s; xi_x = 0.03 + 0.33015 / 3.3015 = 0.13.
+    omega = math.sqrt(9.81 / 0.9)
+    xi = capture_point(com, [0.1 * omega, 0.0, -0.5])
+    np.testing.assert_allclose(xi, [0.13, -0.01], atol=1e-12)
+    assert signed_margin(RECT, xi) == pytest.approx(-0.03, abs=1e-12)
+
+
+# ----------------------------------------------------------------------------- the bundled humanoid
+
+
+@pytest.fixture(scope="module")
+def world() -> World:
+    return build(load("book_transfer"))
+
+
+def test_humanoid_support_polygon_geometry_vs_contacts(world: World) -> None:
+    world.reset()
+    from_geometry = support_polygon(world, world.data, from_contacts=False)
+    # Two soles 0.26 x 0.15 m, centres 0.27 m apart in y: a 0.26 x 0.42 m rectangle.
+    assert polygon_area(from_geometry) == pytest.approx(0.26 * 0.42, rel=0.02)
+    data = mujoco.MjData(world.model)
+    mujoco.mj_resetDataKeyframe(world.model, data, world.ids.keyframe)
+    for _ in range(round(1.0 / world.model.opt.timestep)):
+        mujoco.mj_step(world.model, data)
+    from_physics = support_polygon(world, data, from_contacts=True)
+    a_geo, a_phys = polygon_area(from_geometry), polygon_area(from_physics)
+    print(
+        f"support area: geometry {a_geo:.5f} m^2, contacts after 1 s {a_phys:.5f} m^2 ({data.ncon} contacts)"
+    )
+    assert a_phys == pytest.approx(a_geo, rel=0.05)
+    com = data.subtree_com[world.ids.base_body][:2]
+    assert signed_margin(from_physics, com) > 0.1
+
+
+def _lean_trajectory(world: World, knots: int = 25, duration: float = 1.5) -> Trajectory:
+    """Keyframe -> waist pitched forward with the arms raised ahead (min-jerk blend in qpos)."""
+    model = world.model
+    q0 = world.home_qpos()
+    q1 = q0.copy()
+    for name, value in (("waist_pitch", 0.6), ("left_shoulder_pitch", -1.2), ("right_shoulder_pitch", -1.2)):
+        q1[model.jnt_qposadr[model.joint(name).id]] = value
+    times = np.linspace(0.0, duration, knots)
+    u = times / duration
+    s = u**3 * (10.0 - 15.0 * u + 6.0 * u * u)
+    qpos = (1.0 - s)[:, None] * q0 + s[:, None] * q1
+    data = mujoco.MjData(model)
+    com = np.zeros((knots, 3))
+    for k, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        com[k] = data.subtree_com[world.ids.base_body]
+    return Trajectory(name="lean", times=times, qpos=qpos, hand_paths={}, com_path=com, carried=None)
+
+
+def test_assess_fall_on_a_forward_lean(world: World) -> None:
+    traj = _lean_trajectory(world)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        report = assess_fall(world, traj, RiskConfig(), Uncertainty(com=0.03))
+    assert report.mode == "fall"
+    assert report.severity == RiskConfig().severity.fall
+    for key in ("margin", "seed_risk", "probability", "capture_margin", "com_x", "com_y"):
+        assert report.traces[key].shape == traj.times.shape
+    margin, prob = report.traces["margin"], report.traces["probability"]
+    print(
+        "margin (m):",
+        np.round(margin[::4], 4),
+        "\nprobability:",
+        np.round(prob[::4], 5),
+        f"\ntrajectory P {report.probability:.6f} bounds {report.probability_bounds}",
+        f"seed {report.seed_score:.4f}",
+        f"\nmin capture margin {report.details['min_capture_margin']:.4f} m",
+    )
+    # The CoM moves forward towards the front edge: the margin falls, the probability rises.
+    assert np.all(np.diff(report.traces["com_x"]) >= -1e-9)
+    assert np.all(np.diff(margin) <= 1e-9)
+    assert np.all(np.diff(prob) >= -1e-12)
+    assert prob[-1] > 100.0 * max(prob[0], 1e-6)
+    # Sorted by margin, the probability is non-increasing in the margin.
+    order = np.argsort(margin)
+    assert np.all(np.diff(prob[order]) <= 1e-12)
+    # The CoM is recomputed from qpos: it agrees with the trajectory's own com_path.
+    assert float(report.details["com_path_mismatch"]) < 1e-9
+    # Persistent bias, one-way motion: the trajectory probability is the worst knot's (nearly).
+    lo, hi = report.probability_bounds
+    assert lo <= report.probability <= hi
+    assert report.probability == pytest.approx(float(np.max(prob)), abs=1e-4)
+    assert report.details["min_margin"] == pytest.approx(float(margin[-1]))
+    assert report.seed_score == pytest.approx(float(np.max(report.traces["seed_risk"])))
+    # A moving CoM's capture point leads it: smaller capture margin mid-motion.
+    mid = len(traj.times) // 2
+    assert report.traces["capture_margin"][mid] < margin[mid]
+    assert report.traces["capture_margin"][0] == pytest.approx(margin[0], abs=1e-3)
+
+
+def test_assess_fall_without_uncertainty_uses_the_circle(world: World) -> None:
+    traj = _lean_trajectory(world, knots=8)
+    config = RiskConfig(fall=FallRiskConfig(circle_radius=0.05, exponent=1.0))
+    report = assess_fall(world, traj, config, Uncertainty())
+    margin = report.traces["margin"]
+    expected = [seed_fall_risk(m, 0.05, 1.0) for m in margin]
+    np.testing.assert_allclose(report.traces["seed_risk"], expected)
+    inside = bool(np.all(margin > 0.0))
+    assert report.probability == (0.0 if inside else 1.0)
+
+
+def test_convex_hull_examples() -> None:
+    # A square with interior points and a point on an edge: the 4 corners, CCW from the lowest x.
+    pts = [(0, 0), (1, 0), (1, 1), (0, 1), (0.5, 0.5), (0.5, 0.0), (0.2, 0.7)]
+    np.testing.assert_array_equal(convex_hull(pts), [[0, 0], [1, 0], [1, 1], [0, 1]])
+    # Collinear points: the two extremes.
+    np.testing.assert_array_equal(convex_hull([(0, 0), (2, 2), (1, 1), (3, 3)]), [[0, 0], [3, 3]])
