@@ -124,6 +124,33 @@ def _cmd_run(args: argparse.Namespace) -> int:
     return EXIT_OK if result.success else EXIT_FAILED
 
 
+def _cmd_plan(args: argparse.Namespace) -> int:
+    import mujoco
+
+    from executive.assessment import assess_task
+    from executive.report import plot_alternatives, risk_json, risk_table
+    from executive.risk.fall import support_polygon
+
+    scenario = _load(args.scenario)
+    world = build(scenario)
+    tasks = []
+    for i, task in enumerate(scenario.mission):
+        label = f"{i}: transfer {task.object}"
+        alternatives = assess_task(world, task)
+        tasks.append((label, alternatives))
+        if not args.json:
+            print(risk_table(scenario, label, alternatives))
+        if args.plot:
+            mujoco.mj_forward(world.model, world.data)
+            polygon = support_polygon(world, world.data, from_contacts=False)
+            for path in plot_alternatives(scenario, alternatives, polygon, Path(args.plot) / f"task{i}"):
+                if not args.json:
+                    print(f"plot      {path}")
+    if args.json:
+        print(risk_json(scenario, tasks))
+    return EXIT_OK
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="executive",
@@ -145,6 +172,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--width", type=int, default=960)
     p.add_argument("--height", type=int, default=720)
     p.set_defaults(func=_cmd_show)
+
+    p = sub.add_parser("plan", help="plan every alternative and print its predicted risk (no execution)")
+    p.add_argument("scenario", help=scenario_help)
+    p.add_argument("--json", action="store_true", help="print the table as JSON for machines")
+    p.add_argument("--plot", metavar="DIR", help="write CoM/support-polygon and distance plots to DIR")
+    p.set_defaults(func=_cmd_plan)
 
     p = sub.add_parser("run", help="plan and execute an alternative of the mission in physics")
     p.add_argument("scenario", help=scenario_help)

@@ -1,0 +1,172 @@
+"""Risk of whole alternatives: plan each on the estimate, assess every failure mode, combine.
+
+Per alternative (DESIGN.md, "Data flow of one decision"):
+
+* collision: every motion step is profiled with coal (with its own allowances:
+  the hand may touch the object it grasps, the object its support while lifted
+  or placed); the first-order probability is taken over the union of all knots
+  of all steps, with one static pose error per body for the whole alternative
+  (as a truth world draws it), and the seed score over the concatenated
+  distance profile;
+* fall: the alternative's steps concatenated into one trajectory; the CoM error
+  is one persistent bias, so its probability is exact over all knots;
+* grasp: the first grasp of the object from the table, against the scene's
+  object pose uncertainty (a handover's second grasp takes the object from a
+  hand whose pose the robot knows; it is not scored here);
+* combined: :func:`executive.risk.combine.combine`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from executive.composition import AlternativePlan, plan_alternative
+from executive.planning import Planner, PlanningError, Trajectory
+from executive.risk.collision import (
+    CollisionModel,
+    KnotDistance,
+    collision_probability,
+    instantaneous_risk,
+    seed_collision_score,
+)
+from executive.risk.combine import CombinedRisk, combine
+from executive.risk.fall import assess_fall
+from executive.risk.grasp import assess_grasp, hand_pose_at
+from executive.risk.report import RiskReport
+from executive.scenario_types import TransferTask
+from executive.world import World
+
+__all__ = ["AlternativeRisk", "assess_plan", "assess_task", "concatenate"]
+
+
+@dataclass(frozen=True)
+class AlternativeRisk:
+    """One alternative of a task: its plan (if feasible) and its risk."""
+
+    name: str
+    feasible: bool
+    risk: CombinedRisk | None
+    plan: AlternativePlan | None
+    error: str = ""
+    plan_s: float = 0.0
+    assess_s: float = 0.0
+
+
+def concatenate(trajectories: list[Trajectory], name: str) -> Trajectory:
+    """One trajectory through every knot of ``trajectories`` in order (times made cumulative)."""
+    times, qpos, com = [], [], []
+    hands: dict[str, list[np.ndarray]] = {side: [] for side in trajectories[0].hand_paths}
+    offset = 0.0
+    for k, traj in enumerate(trajectories):
+        skip = 1 if k > 0 else 0  # a step starts where the previous ended: drop the repeated knot
+        times.append(traj.times[skip:] + offset)
+        qpos.append(traj.qpos[skip:])
+        com.append(traj.com_path[skip:])
+        for side in hands:
+            hands[side].append(traj.hand_paths[side][skip:])
+        offset += traj.duration
+    return Trajectory(
+        name=name,
+        times=np.concatenate(times),
+        qpos=np.concatenate(qpos),
+        hand_paths={side: np.concatenate(parts) for side, parts in hands.items()},
+        com_path=np.concatenate(com),
+        carried=None,
+        free_quat_adr=trajectories[0].free_quat_adr,
+    )
+
+
+def _collision(model: CollisionModel, plan: AlternativePlan) -> RiskReport:
+    config = model.risk_config
+    obj = plan.task.object
+    times: list[np.ndarray] = []
+    knots: list[KnotDistance] = []
+    offset = 0.0
+    for step in plan.steps:
+        traj = plan.trajectories.get(step.name)
+        if traj is None:
+            continue
+        allow: set[tuple[str, str]] = set()
+        if obj in step.allow_contact or traj.carried is not None:
+            for side, held in [(step.side, obj), *([traj.carried] if traj.carried else [])]:
+                allow |= model.hand_allow(side, held)
+        if step.kind in ("lift", "place"):
+            allow |= model.support_allow(obj)
+        profile = model.profile(traj, allow=frozenset(allow))
+        times.append(profile.times + offset)
+        knots.extend(profile.knots)
+        offset += traj.duration
+    t = np.concatenate(times)
+    distances = np.array([k.distance for k in knots])
+    seed = seed_collision_score(t, distances, config.d_safety, config.collision)
+    prob = collision_probability([k.near for k in knots], model.setup.env_sigma)
+    k_min = int(np.argmin(distances))
+    closest = knots[k_min]
+    part, factor = model.body_part(closest.robot_geom)
+    return RiskReport(
+        mode="collision",
+        probability=prob.probability,
+        probability_bounds=(prob.lower, prob.upper),
+        severity=float(config.severity.collision) * factor,
+        seed_score=seed.score,
+        times=t,
+        traces={
+            "distance": distances,
+            "instantaneous_risk": np.asarray(
+                instantaneous_risk(distances, config.d_safety, config.collision.exponent), dtype=float
+            ),
+            "probability": prob.per_knot,
+        },
+        details={
+            "min_distance": float(closest.distance),
+            "min_distance_time": float(t[k_min]),
+            "closest_robot_body": closest.robot_body_name,
+            "closest_env_body": closest.env_body_name,
+            "body_part": part,
+            "peak_term": seed.peak,
+            "exposure_term": seed.exposure,
+        },
+    )
+
+
+def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionModel) -> CombinedRisk:
+    """Collision, fall and grasp risk of a planned alternative, and their combination."""
+    scenario = world.scenario
+    ordered = plan.ordered_trajectories()
+    whole = concatenate(ordered, plan.name)
+    fall = assess_fall(world, whole, scenario.risk, scenario.uncertainty)
+    collision = _collision(collision_model, plan)
+    grasp_step = next(s for s in plan.steps if s.kind == "grasp")
+    approach = [s for s in plan.steps[: plan.steps.index(grasp_step)] if s.name in plan.trajectories][-1]
+    pose = hand_pose_at(world, plan.trajectories[approach.name], grasp_step.side)
+    grasp = assess_grasp(world, grasp_step.side, plan.task.object, pose, scenario.risk, scenario.uncertainty)
+    return combine([collision, fall, grasp], scenario.risk)
+
+
+def assess_task(
+    world: World,
+    task: TransferTask,
+    planner: Planner | None = None,
+    collision_model: CollisionModel | None = None,
+    q_start: np.ndarray | None = None,
+) -> list[AlternativeRisk]:
+    """Plan and assess every alternative of ``task`` on the estimate ``world``."""
+    planner = planner or Planner(world)
+    model = collision_model or CollisionModel(
+        world, world.scenario.risk, uncertainty=world.scenario.uncertainty
+    )
+    out = []
+    for name in task.alternatives:
+        t0 = time.perf_counter()
+        try:
+            plan = plan_alternative(planner, world, task, name, q_start)
+        except PlanningError as exc:
+            out.append(AlternativeRisk(name, False, None, None, str(exc), time.perf_counter() - t0))
+            continue
+        t1 = time.perf_counter()
+        risk = assess_plan(world, plan, model)
+        out.append(AlternativeRisk(name, True, risk, plan, "", t1 - t0, time.perf_counter() - t1))
+    return out
