@@ -47,5 +47,5 @@ class RobotBehaviour(py_trees.behaviour.Behaviour):
         failure = self.robot.failure
         if failure is None:
             return False
-        self.feedback_message = f"{failure.mode}: {failure.detail}"
+        self.feedback_message = failure.detail  # already "<mode>: ..."
         return True

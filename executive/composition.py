@@ -51,7 +51,12 @@ class CompositionConfig:
     handover_offset: float = 0.06  # grasp points either side of the object's centre
     handover_point: tuple[float, float] = (0.30, 0.0)  # object centre x y at the handover
     handover_height: float = 0.20  # object centre above the table top at the handover
-    obstacle_clearance: float = 0.03  # how close a one-arm carry skirts the obstacles' front
+    giver_end: int = -1  # the end of the object's x axis the giver grasps (+1 or -1)
+    turn_point: tuple[float, float] | None = None  # object centre x y after the receiver's turn
+    receiver_turn_steps: int = 1  # the receiver's turn to the place yaw, in this many moves
+    giver_turn_steps: int = 1  # the giver's quarter turn to the handover, in this many moves
+    handover_side: float = 0.10  # the receiver rises this far out on its side of the handover
+    obstacle_clearance: float = 0.07  # how close a one-arm carry skirts the obstacles' front
 
 
 @dataclass(frozen=True)
@@ -131,18 +136,28 @@ def transfer_steps(
     target_z = task.to[2] if task.to[2] is not None else scene.table.height + body.half_height()
     place_yaw = task.to_yaw_rad if task.to_yaw_rad is not None else yaw
     axis = np.array([np.cos(yaw), np.sin(yaw), 0.0])
-    place_axis = np.array([np.cos(place_yaw), np.sin(place_yaw), 0.0])
     up = np.array([0.0, 0.0, 1.0])
     home = _home_targets(world)
 
-    def target(side: str, point: FloatArray, hand_yaw: float) -> HandTarget:
+    def closing_near_home(side: str, hand_yaw: float) -> float:
         # The jaws are symmetric: of the two closing directions, take the one nearer the home pose's.
         mat = np.zeros(9)
         mujoco.mju_quat2Mat(mat, home[side].quat)
         home_yaw = float(np.arctan2(mat[4], mat[1]))  # yaw of the home frame's y (closing) axis
         closing = hand_yaw + np.pi / 2
-        if np.cos(closing - home_yaw) < 0:
-            closing += np.pi
+        return closing + np.pi if np.cos(closing - home_yaw) < 0 else closing
+
+    def target(side: str, point: FloatArray, hand_yaw: float, grasp_yaw: float | None = None) -> HandTarget:
+        """Top-down hand target whose jaws close across an object at ``hand_yaw``.
+
+        ``grasp_yaw``: the object's yaw when this hand grasped it. A hand that holds (or has just
+        released) an object turns it with itself, so its closing direction is the grasp's
+        turned by the object's change of yaw, not whichever of the two is nearer home.
+        """
+        if grasp_yaw is None:
+            closing = closing_near_home(side, hand_yaw)
+        else:
+            closing = closing_near_home(side, grasp_yaw) + (hand_yaw - grasp_yaw)
         return HandTarget(side, np.asarray(point, dtype=float), _top_down_quat(closing))
 
     # Obstacle front: the carry skirts the nearest obstacle face at obstacle_clearance.
@@ -153,30 +168,41 @@ def transfer_steps(
     length = body.size[0] if body.shape == "box" else 2 * body.size[0]
 
     if alternative in ("left", "right"):
+        # Straight, simple hand paths: up, back to the lane in front of the obstacles, across the
+        # body in that lane (the carried object skirting the obstacles' front at
+        # obstacle_clearance: the one-arm alternatives' risk), forward over the place, down.
         s = alternative
         grasp = np.array([pos[0], pos[1], grasp_z])
         place = np.array([task.to[0], task.to[1], target_z + site_above_centre])
         lift_z = grasp[2] + cfg.lift_height
-        via = np.array([min(front_x - cfg.obstacle_clearance - length / 2, grasp[0]), 0.0, lift_z])
+        carry_z = max(lift_z, place[2] + cfg.approach_height)
+        lane_x = min(front_x - cfg.obstacle_clearance - length / 2, grasp[0], place[0])
+        carry_yaw = (yaw + place_yaw) / 2
+        lane_in = np.array([lane_x, grasp[1], carry_z])
+        lane_out = np.array([lane_x, place[1], carry_z])
+        carried = (s, obj)
         return [
             Step("move", f"{s}.pre_grasp", s, (target(s, grasp + cfg.approach_height * up, yaw),)),
             Step("move", f"{s}.approach", s, (target(s, grasp, yaw),), allow_contact=(obj,)),
             Step("grasp", f"{s}.grasp", s, obj=obj),
-            Step("lift", f"{s}.lift", s, (target(s, grasp + cfg.lift_height * up, yaw),), carried=(s, obj)),
-            Step("carry", f"{s}.transfer", s, (target(s, via, (yaw + place_yaw) / 2),), carried=(s, obj)),
+            Step(
+                "lift", f"{s}.lift", s, (target(s, grasp + cfg.lift_height * up, yaw, yaw),), carried=carried
+            ),
+            Step("carry", f"{s}.to_lane", s, (target(s, lane_in, carry_yaw, yaw),), carried=carried),
+            Step("carry", f"{s}.transfer", s, (target(s, lane_out, carry_yaw, yaw),), carried=carried),
             Step(
                 "carry",
                 f"{s}.pre_place",
                 s,
-                (target(s, place + cfg.approach_height * up, place_yaw),),
-                carried=(s, obj),
+                (target(s, place + cfg.approach_height * up, place_yaw, yaw),),
+                carried=carried,
             ),
             Step(
                 "place",
                 f"{s}.place",
                 s,
-                (target(s, place, place_yaw),),
-                carried=(s, obj),
+                (target(s, place, place_yaw, yaw),),
+                carried=carried,
                 allow_contact=("table_top",),
             ),
             Step("release", f"{s}.release", s, obj=obj),
@@ -184,7 +210,7 @@ def transfer_steps(
                 "retreat",
                 f"{s}.retreat",
                 s,
-                (target(s, place + cfg.approach_height * up, place_yaw),),
+                (target(s, place + cfg.approach_height * up, place_yaw, yaw),),
                 allow_contact=(obj,),
             ),
             Step("home", f"{s}.home", s, (home[s],), allow_contact=(obj,)),
@@ -192,17 +218,49 @@ def transfer_steps(
 
     giver, receiver = alternative.split("_to_")
     d = cfg.handover_offset
-    # The giver holds the object's -x end, the receiver its +x end.
-    grasp_g = np.array([*(pos[:2] - d * axis[:2]), grasp_z])
+    # The giver holds the object's +x end (giver_end = 1) or its -x end (-1), the receiver the other.
+    e = 1.0 if cfg.giver_end > 0 else -1.0
+    grasp_g = np.array([*(pos[:2] + e * d * axis[:2]), grasp_z])
     hx, hy = cfg.handover_point
     h_centre = np.array([hx, hy, scene.table.height + cfg.handover_height + body.half_height()])
     # At the handover the object lies across the body, the giver's end on the giver's side, so
-    # the hands meet side by side, each forearm coming from its own shoulder.
-    h_yaw = -np.pi / 2 if giver == "left" else np.pi / 2
-    h_axis = np.array([np.cos(h_yaw), np.sin(h_yaw), 0.0])
-    hand_g = h_centre - d * h_axis + site_above_centre * up
-    hand_r = h_centre + d * h_axis + site_above_centre * up
-    place_r = np.array([*(np.array(task.to[:2]) + d * place_axis[:2]), target_z + site_above_centre])
+    # the hands meet side by side, each forearm coming from its own shoulder. The giver turns it
+    # by the shortest way that puts its end on its own side (a quarter turn for an object lying
+    # along x; for the left giver holding the -x end, clockwise: its forearm swings out to its side).
+    side_dir = np.array([0.0, 1.0 if giver == "left" else -1.0, 0.0])
+    h_yaw = float(np.arctan2(e * side_dir[1], 0.0))
+    hand_g = h_centre + d * side_dir + site_above_centre * up
+    hand_r = h_centre - d * side_dir + site_above_centre * up
+    # While one hand holds the object at the handover and the other moves, the holding hand is
+    # kept where it is (an idle arm would move with the torso and carry the object away).
+    hold_g = target(giver, hand_g, h_yaw, yaw)
+    hold_r = target(receiver, hand_r, h_yaw)
+    # The giver turns the object in giver_turn_steps equal parts on the way (shortest turn).
+    lift_g = grasp_g + cfg.lift_height * up
+    back_g = np.array([hx + e * d * axis[0], lift_g[1], max(lift_g[2], hand_g[2])])
+    turn_g = float(np.remainder(h_yaw - yaw + np.pi, 2 * np.pi) - np.pi)
+    n_turn = max(1, cfg.giver_turn_steps)
+    # The receiver's wrist turns back the natural way (its closing direction ends nearer its home
+    # pose's). With both wrists turning naturally the object ends a half turn from place_yaw: the
+    # same pose for a box (symmetric under a half turn about the vertical) but not for every
+    # object, and a task that names its yaw checks it.
+    back = float(
+        np.remainder(
+            closing_near_home(receiver, place_yaw) - closing_near_home(receiver, h_yaw) + np.pi, 2 * np.pi
+        )
+        - np.pi
+    )
+    final_yaw = h_yaw + back
+    final_axis = np.array([np.cos(final_yaw), np.sin(final_yaw), 0.0])
+    n_back = max(1, cfg.receiver_turn_steps)
+    place_r = np.array([*(np.array(task.to[:2]) - e * d * final_axis[:2]), target_z + site_above_centre])
+    # After the handover the receiver turns the object to its place yaw in front of the body,
+    # already over the place's y (far from the obstacles), then carries it straight out over the
+    # place and sets it down.
+    tx, ty = cfg.turn_point if cfg.turn_point is not None else (h_centre[0], float(task.to[1]))
+    turn_r = np.array(
+        [tx - e * d * final_axis[0], ty - e * d * final_axis[1], h_centre[2] + site_above_centre]
+    )
     return [
         Step("move", f"{giver}.pre_grasp", giver, (target(giver, grasp_g + cfg.approach_height * up, yaw),)),
         Step("move", f"{giver}.approach", giver, (target(giver, grasp_g, yaw),), allow_contact=(obj,)),
@@ -211,47 +269,121 @@ def transfer_steps(
             "lift",
             f"{giver}.lift",
             giver,
-            (target(giver, grasp_g + cfg.lift_height * up, yaw),),
+            (target(giver, grasp_g + cfg.lift_height * up, yaw, yaw),),
             carried=(giver, obj),
         ),
-        Step("carry", f"{giver}.to_handover", giver, (target(giver, hand_g, h_yaw),), carried=(giver, obj)),
+        # Back out of the table first (the object keeps its yaw), then across and turning: the
+        # object's far end then sweeps well clear of the obstacles' front corner.
+        Step(
+            "carry",
+            f"{giver}.back",
+            giver,
+            (target(giver, back_g, yaw, yaw),),
+            carried=(giver, obj),
+        ),
+        *(
+            Step(
+                "carry",
+                f"{giver}.turn{k}",
+                giver,
+                (target(giver, back_g + (hand_g - back_g) * k / n_turn, yaw + turn_g * k / n_turn, yaw),),
+                carried=(giver, obj),
+            )
+            for k in range(1, n_turn)
+        ),
+        Step(
+            "carry", f"{giver}.to_handover", giver, (target(giver, hand_g, h_yaw, yaw),), carried=(giver, obj)
+        ),
+        # The receiver rises on its own side first and comes over its end of the object from
+        # above (a straight reach from its side would sweep low past the object's end).
+        Step(
+            "move",
+            f"{receiver}.rise",
+            receiver,
+            (
+                target(receiver, hand_r - cfg.handover_side * side_dir + cfg.approach_height * up, h_yaw),
+                hold_g,
+            ),
+            carried=(giver, obj),
+        ),
         Step(
             "move",
             f"{receiver}.pre_handover",
             receiver,
-            (target(receiver, hand_r + cfg.approach_height * up, h_yaw),),
+            (target(receiver, hand_r + cfg.approach_height * up, h_yaw), hold_g),
             carried=(giver, obj),
         ),
         Step(
             "move",
             f"{receiver}.handover_approach",
             receiver,
-            (target(receiver, hand_r, h_yaw),),
+            (target(receiver, hand_r, h_yaw), hold_g),
             carried=(giver, obj),
             allow_contact=(obj,),
         ),
         Step("grasp", f"{receiver}.grasp", receiver, obj=obj),
         Step("release", f"{giver}.release", giver, obj=obj),
+        # The giver's open jaws leave straight up (a palm moving down and sideways would push
+        # the object's end down and turn it in the receiver's grip), out to its side, then home.
         Step(
             "retreat",
             f"{giver}.retreat",
             giver,
-            (home[giver],),
+            (target(giver, hand_g + cfg.approach_height * up, h_yaw, yaw), hold_r),
             carried=(receiver, obj),
             allow_contact=(obj,),
+        ),
+        Step(
+            "move",
+            f"{giver}.clear",
+            giver,
+            (
+                target(giver, hand_g + cfg.handover_side * side_dir + cfg.approach_height * up, h_yaw, yaw),
+                hold_r,
+            ),
+            carried=(receiver, obj),
+        ),
+        Step(
+            "home",
+            f"{giver}.home",
+            giver,
+            (home[giver], hold_r),
+            carried=(receiver, obj),
+            allow_contact=(obj,),
+        ),
+        *(
+            Step(
+                "carry",
+                f"{receiver}.turn{k}",
+                receiver,
+                (
+                    target(
+                        receiver, hand_r + (turn_r - hand_r) * k / n_back, h_yaw + back * k / n_back, h_yaw
+                    ),
+                ),
+                carried=(receiver, obj),
+            )
+            for k in range(1, n_back)
+        ),
+        Step(
+            "carry",
+            f"{receiver}.turn",
+            receiver,
+            (target(receiver, turn_r, final_yaw, h_yaw),),
+            carried=(receiver, obj),
         ),
         Step(
             "carry",
             f"{receiver}.pre_place",
             receiver,
-            (target(receiver, place_r + cfg.approach_height * up, place_yaw),),
+            (target(receiver, place_r + cfg.approach_height * up, final_yaw, h_yaw),),
             carried=(receiver, obj),
         ),
         Step(
             "place",
             f"{receiver}.place",
             receiver,
-            (target(receiver, place_r, place_yaw),),
+            (target(receiver, place_r, final_yaw, h_yaw),),
             carried=(receiver, obj),
             allow_contact=("table_top",),
         ),
@@ -260,7 +392,7 @@ def transfer_steps(
             "retreat",
             f"{receiver}.retreat",
             receiver,
-            (target(receiver, place_r + cfg.approach_height * up, place_yaw),),
+            (target(receiver, place_r + cfg.approach_height * up, final_yaw, h_yaw),),
             allow_contact=(obj,),
         ),
         Step("home", f"{receiver}.home", receiver, (home[receiver],), allow_contact=(obj,)),
@@ -286,7 +418,12 @@ def plan_alternative(
         if not step.targets:
             continue
         traj = planner.move(
-            q, list(step.targets), name=step.name, carried=step.carried, allow_contact=step.allow_contact
+            q,
+            list(step.targets),
+            name=step.name,
+            carried=step.carried,
+            allow_contact=step.allow_contact,
+            rest=step.kind == "home",
         )
         trajectories[step.name] = traj
         q = traj.qpos[-1]

@@ -27,11 +27,21 @@ class JointTargetController:
     """Maps a full-model qpos target to the robot's position-servo ctrl.
 
     MuJoCo's position actuator applies ``kp (ctrl - q) - kv qdot``; to hold a
-    joint at ``q*`` against a bias torque ``tau`` the servo needs
-    ``ctrl = q* + tau / kp`` (gravity feed-forward). It is applied to the arm
-    and waist joints only: for a floating-base robot ``qfrc_bias`` of a leg
-    joint is the torque of the subtree *below* it (the foot), not of the body
-    the stance leg carries, so the legs rely on their stiff gains alone.
+    joint at ``q*`` against a static load torque ``tau`` the servo needs
+    ``ctrl = q* + tau / kp`` (feed-forward). The static load is
+    ``tau = g(q) - J_c^T f`` (``M qacc + bias = tau + J_c^T f`` with ``qacc = 0``):
+
+    * arm and waist joints: ``qfrc_bias`` of the current state, the gravity of the
+      links they carry (no contact term: a contact on the arm is not pushed against);
+    * leg joints: for a floating-base robot ``g`` of a leg joint is only the weight of
+      the links *below* it; the body the stance leg carries reaches it through the
+      floor's support. The support wrenches ``f`` (one per foot, at the foot body) are
+      the least-squares solution of the floating base's equilibrium
+      ``J_c,base^T f = g_base`` in the *target* pose, so ``tau_legs = g_legs - J_c,legs^T f``
+      is the torque that holds the planned pose without any sag. It is a model-based
+      feed-forward (computed once per new target), not a measured one: feeding back the
+      measured contact forces would cancel the ankles' stiffness against toppling.
+
     Gripper actuators are left to :meth:`SimulatedRobot.set_gripper`.
     """
 
@@ -41,7 +51,18 @@ class JointTargetController:
         arm_and_waist = {j for ids in world.ids.arm_joints.values() for j in ids}
         for name in world.profile.waist_joints:
             arm_and_waist.add(int(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)))
-        acts, qadr, dadr, kp, ff = [], [], [], [], []
+        legs = {
+            int(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name))
+            for names in world.profile.leg_joints.values()
+            for name in names
+        }
+        self.model = model
+        self._scratch = mujoco.MjData(model)
+        self.feet = [int(model.body(foot.body).id) for foot in world.profile.feet.values()]
+        free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+        base = next(j for j in free if int(model.jnt_bodyid[j]) == world.ids.base_body)
+        self.base_dofs = np.arange(int(model.jnt_dofadr[base]), int(model.jnt_dofadr[base]) + 6)
+        acts, qadr, dadr, kp, kv, ff, support = [], [], [], [], [], [], []
         for a in range(model.nu):
             if a in grippers or model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT:
                 continue
@@ -50,20 +71,55 @@ class JointTargetController:
             qadr.append(int(model.jnt_qposadr[joint]))
             dadr.append(int(model.jnt_dofadr[joint]))
             kp.append(float(model.actuator_gainprm[a, 0]))
-            ff.append(joint in arm_and_waist)
+            kv.append(-float(model.actuator_biasprm[a, 2]))  # position servo bias: -kp q - kv qdot
+            ff.append(joint in arm_and_waist or joint in legs)
+            support.append(joint in legs)
         self.actuators = np.array(acts, dtype=int)
         self.qpos_adr = np.array(qadr, dtype=int)
         self.dof_adr = np.array(dadr, dtype=int)
         self.kp = np.array(kp)
+        self.kv = np.array(kv)
         self.feed_forward = np.array(ff, dtype=bool)
+        self.support = np.array(support, dtype=bool)
         self.ctrl_low = model.actuator_ctrlrange[self.actuators, 0]
         self.ctrl_high = model.actuator_ctrlrange[self.actuators, 1]
 
-    def joint_ctrl(self, q_target: FloatArray, data: mujoco.MjData) -> FloatArray:
-        """Servo targets for the non-gripper actuators, in the order of ``self.actuators``."""
+    def leg_load(self, q_target: FloatArray) -> FloatArray:
+        """Static torque of each leg actuator holding ``q_target`` on both feet (0 elsewhere)."""
+        model, d = self.model, self._scratch
+        d.qpos[:] = q_target
+        d.qvel[:] = 0.0
+        mujoco.mj_kinematics(model, d)
+        mujoco.mj_comPos(model, d)
+        gravity = np.empty(model.nv)
+        mujoco.mj_rne(model, d, 0, gravity)  # qvel = 0, no acceleration: gravity only
+        jac = np.empty((6 * len(self.feet), model.nv))
+        for i, foot in enumerate(self.feet):
+            mujoco.mj_jacBody(model, d, jac[6 * i : 6 * i + 3], jac[6 * i + 3 : 6 * i + 6], foot)
+        wrench = np.linalg.lstsq(jac[:, self.base_dofs].T, gravity[self.base_dofs], rcond=None)[0]
+        load = gravity[self.dof_adr] - (jac[:, self.dof_adr].T @ wrench)
+        return np.where(self.support, load, 0.0)
+
+    def joint_ctrl(
+        self,
+        q_target: FloatArray,
+        data: mujoco.MjData,
+        leg_load: FloatArray | None = None,
+        qvel_target: FloatArray | None = None,
+    ) -> FloatArray:
+        """Servo targets for the non-gripper actuators, in the order of ``self.actuators``.
+
+        ``leg_load``: :meth:`leg_load` of ``q_target`` (computed here when not given).
+        ``qvel_target``: the target's joint velocity (full-model qpos layout; robot joints are
+        hinges and slides): the servo's damping ``kv qdot`` is fed forward as ``kv / kp qdot*``,
+        so a joint that follows a moving target does not lag it by ``kv / kp`` seconds.
+        """
         ctrl = q_target[self.qpos_adr].copy()
-        bias = data.qfrc_bias[self.dof_adr]
-        ctrl[self.feed_forward] += bias[self.feed_forward] / self.kp[self.feed_forward]
+        if qvel_target is not None:
+            ctrl += self.kv / self.kp * qvel_target[self.qpos_adr]
+        load = np.where(self.support, 0.0, data.qfrc_bias[self.dof_adr])
+        load += self.leg_load(q_target) if leg_load is None else leg_load
+        ctrl[self.feed_forward] += load[self.feed_forward] / self.kp[self.feed_forward]
         return np.clip(ctrl, self.ctrl_low, self.ctrl_high)
 
 
@@ -90,6 +146,8 @@ class SimulatedRobot:
         self.detector = detector if detector is not None else FailureDetector(world)
         self.controller = JointTargetController(world)
         self.q_target: FloatArray = self.data.qpos.copy()
+        self.qvel_target: FloatArray = np.zeros(self.model.nq)
+        self._leg_load = self.controller.leg_load(self.q_target)
         self.gripper_ctrl: dict[str, FloatArray] = {}
         for side, arm in world.profile.arms.items():
             ids = world.ids.gripper_actuators[side]
@@ -105,9 +163,18 @@ class SimulatedRobot:
     def failure(self) -> Failure | None:
         return self.detector.failure
 
-    def set_joint_targets(self, q_target: FloatArray) -> None:
-        """Targets for every robot joint, given as a full-model qpos (object entries ignored)."""
-        self.q_target = np.asarray(q_target, dtype=float)
+    def set_joint_targets(self, q_target: FloatArray, qvel_target: FloatArray | None = None) -> None:
+        """Targets for every robot joint, given as a full-model qpos (object entries ignored).
+
+        ``qvel_target`` (same layout, d q_target / dt): the target moves on at this rate during
+        the control period (the servos track a ramp, not a staircase) and the servos' damping
+        is fed forward. None: a fixed target.
+        """
+        q = np.asarray(q_target, dtype=float)
+        if not np.array_equal(q, self.q_target):
+            self._leg_load = self.controller.leg_load(q)
+        self.q_target = q
+        self.qvel_target = np.zeros(self.model.nq) if qvel_target is None else np.asarray(qvel_target, float)
 
     def set_gripper(self, side: str, closed: bool) -> None:
         grip = self.world.profile.arms[side].gripper
@@ -121,13 +188,21 @@ class SimulatedRobot:
     def hold(self) -> None:
         """Safe hold: servo every joint to where it is now."""
         self.q_target = self.data.qpos.copy()
+        self.qvel_target = np.zeros(self.model.nq)
+        self._leg_load = self.controller.leg_load(self.q_target)
 
     def advance(self) -> Failure | None:
         """Step physics for one control period; stop early at the first detected failure."""
         ctrl = self.data.ctrl
         start = time.perf_counter()
-        for _ in range(self.substeps):
-            ctrl[self.controller.actuators] = self.controller.joint_ctrl(self.q_target, self.data)
+        moving = bool(np.any(self.qvel_target))
+        for k in range(self.substeps):
+            target = (
+                self.q_target + (k * self.model.opt.timestep) * self.qvel_target if moving else self.q_target
+            )
+            ctrl[self.controller.actuators] = self.controller.joint_ctrl(
+                target, self.data, self._leg_load, self.qvel_target if moving else None
+            )
             for side, values in self.gripper_ctrl.items():
                 ctrl[list(self.world.ids.gripper_actuators[side])] = values
             mujoco.mj_step(self.model, self.data)

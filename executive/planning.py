@@ -52,7 +52,13 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from executive.planning_limits import GeomPairCollisionLimit, SupportPolygon, SupportPolygonLimit, geom_pairs
+from executive.planning_limits import (
+    GeomPairCollisionLimit,
+    SupportPolygon,
+    SupportPolygonLimit,
+    TiltLimit,
+    geom_pairs,
+)
 from executive.planning_route import footprint, via_points, world_box
 from executive.planning_timing import Frames, TimedJoints, Trajectory, build_trajectory
 from executive.planning_types import (
@@ -126,7 +132,10 @@ class Planner:
             for n in names:
                 posture_cost[model.jnt_dofadr[model.joint(n).id]] = cost
         self.posture_cost = posture_cost
-        self.posture = mink.PostureTask(model, cost=posture_cost)
+        self.posture = mink.PostureTask(model, cost=posture_cost, gain=cfg.posture_gain)
+        self.body_qadr = np.array(
+            [int(model.jnt_qposadr[model.joint(n).id]) for n in legs | waist], dtype=int
+        )
         self.arm_dofs = {
             s: np.array([int(model.jnt_dofadr[j]) for j in ids.arm_joints[s]], dtype=int) for s in self.sides
         }
@@ -160,6 +169,7 @@ class Planner:
             mink.ConfigurationLimit(model),
             mink.VelocityLimit(model, velocity),
         ]
+        self.tilt = TiltLimit(model, ids.torso_body, float(np.radians(cfg.max_torso_tilt_deg)))
         self.foot_geoms = [g for s in sorted(ids.foot_geoms) for g in ids.foot_geoms[s]]
         self._collision_groups()
 
@@ -205,6 +215,14 @@ class Planner:
             groups.append(([carried_geom], env + self.body_geoms + others))
         return [p for p in geom_pairs(self.model, groups) if not allowed & set(p)]
 
+    def required_clearance(self, pairs: Sequence[tuple[int, int]]) -> FloatArray:
+        """Clearance (m) each pair must keep: ``table_distance`` against the table, else ``min_distance``."""
+        table = set(self.world.ids.table_geoms)
+        cfg = self.config
+        return np.array(
+            [cfg.table_distance if table & {a, b} else cfg.min_distance for a, b in pairs], dtype=float
+        )
+
     def _geom(self, name: str) -> int:
         if name not in self.geom_names:
             valid = ", ".join(sorted(self.geom_names))
@@ -221,8 +239,14 @@ class Planner:
         name: str,
         carried: tuple[str, str] | None = None,
         allow_contact: Sequence[str] = (),
+        rest: bool = False,
     ) -> Trajectory:
         """Plan the whole body from ``q_start`` until every target hand is at its target.
+
+        The posture task pulls the arms towards the home keyframe; the legs and waist hold
+        their start angles (the body moves only as far as the hands need, so a short hand
+        move is a short whole-body move), unless ``rest``: a return to the rest pose, where
+        the legs and waist are pulled towards the keyframe too.
 
         Raises PlanningError when a hand is still outside tolerance after the
         iteration budget (or when progress stalls), naming the side and the
@@ -240,6 +264,8 @@ class Planner:
         # Posture: the keyframe, except that an idle arm holds its start joint angles (so it
         # moves with the torso and cannot wander into it).
         posture_target = self.world.home_qpos()
+        if cfg.hold_body and not rest:
+            posture_target[self.body_qadr] = conf.q[self.body_qadr]
         posture_cost = self.posture_cost.copy()
         idle_dofs = np.zeros(model.nv, dtype=bool)
         tasks: list[mink.Task] = [self.com, self.posture]
@@ -271,20 +297,24 @@ class Planner:
                 site_pose(conf.data, ids.hand_sites[side]).inverse()
                 @ body_pose(conf.data, ids.object_bodies[obj]),
             )
+        pairs = self.collision_pairs(carried, allow_contact)
+        required = self.required_clearance(pairs)
         collisions = GeomPairCollisionLimit(
             model,
-            self.collision_pairs(carried, allow_contact),
-            cfg.min_distance,
+            pairs,
+            # As for the balance: a little extra in the QP keeps the interpolated knots clear.
+            required + cfg.clearance_tolerance,
             cfg.detection_distance,
             cfg.collision_gain,
             attach,
         )
         # Keep a small extra margin in the QP so that interpolated knots stay inside the checked one.
         balance = SupportPolygonLimit(model, ids.base_body, polygon, cfg.support_margin + 0.002)
-        limits = [*self.static_limits, balance, collisions]
+        limits = [*self.static_limits, self.tilt, balance, collisions]
         constraints: list[mink.Task] = [*self.feet, self.freeze]
 
         clearance0 = collisions.distances(conf.data)
+        clearance = clearance0
         path = [conf.q]
         errors = self._errors(active)
         history = [max(p + a for p, a in errors.values())]
@@ -302,6 +332,7 @@ class Planner:
                 history = history[-1:]
             elif self._stalled(history, cfg.stall_iterations):
                 self._fail(name, errors, iterations)
+            self._lead(active)
             tick = time.perf_counter()
             try:
                 velocity = mink.solve_ik(
@@ -325,12 +356,7 @@ class Planner:
                     f"{side} hand {pos:.3f} m and {np.degrees(ang):.1f} deg from its target",
                 ) from exc
             ik_time += time.perf_counter() - tick
-            conf.integrate_inplace(velocity, cfg.ik_dt)
-            conf.update()
-            self._project_feet()
-            if relative is not None:
-                attach_object(conf.data, relative)
-                conf.update()
+            clearance = self._step(velocity, relative, collisions, clearance, required)
             iterations += 1
             path.append(conf.q)
             errors = self._errors(active)
@@ -355,7 +381,7 @@ class Planner:
             relative,
             polygon,
             collisions,
-            clearance0,
+            np.minimum(clearance0, required),
         )
         self.last_stats = PlanStats(
             name, iterations, ik_time, time.perf_counter() - started, len(trajectory.times)
@@ -388,6 +414,60 @@ class Planner:
             )
             routes[t.side] = [se3(v, t.quat) for v in vias] + [se3(t.position, t.quat)]
         return routes
+
+    def _lead(self, goals: dict[str, mink.SE3]) -> None:
+        """Point each hand task at most ``lead_distance`` / ``lead_angle_rad`` ahead of the hand.
+
+        The hand then follows the straight line (and the shortest rotation) to its goal,
+        while the balance and posture tasks keep up, instead of lunging at a far goal
+        with whatever joints are cheapest and curving back later.
+        """
+        cfg, data = self.config, self.configuration.data
+        for side, goal in goals.items():
+            pose = site_pose(data, self.world.ids.hand_sites[side])
+            delta = goal.translation() - pose.translation()
+            turn = (pose.rotation().inverse() @ goal.rotation()).log()
+            dist, ang = float(np.linalg.norm(delta)), float(np.linalg.norm(turn))
+            alpha = min(1.0, cfg.lead_distance / max(dist, 1e-12), cfg.lead_angle_rad / max(ang, 1e-12))
+            if alpha >= 1.0:
+                self.hands[side].set_target(goal)
+                continue
+            rotation = pose.rotation() @ mink.SO3.exp(alpha * turn)
+            self.hands[side].set_target(
+                mink.SE3.from_rotation_and_translation(rotation, pose.translation() + alpha * delta)
+            )
+
+    def _step(
+        self,
+        velocity: FloatArray,
+        relative: Relative | None,
+        collisions: GeomPairCollisionLimit,
+        clearance: FloatArray,
+        required: FloatArray,
+    ) -> FloatArray:
+        """Integrate one IK step, halving it while a pair ends up closer than the QP allowed.
+
+        The collision rows bound the approach to first order only; near a box's edge a
+        long step can still cut in by millimetres. Pairs must keep their ``required``
+        clearance (or, when already closer, not come closer). Returns the pairs' distances after the step.
+        """
+        conf, cfg = self.configuration, self.config
+        q_prev = conf.q.copy()
+        floor = np.minimum(clearance, required)
+        alpha = 1.0
+        for attempt in range(cfg.backtrack_steps + 1):
+            conf.integrate_inplace(velocity * alpha, cfg.ik_dt)
+            conf.update()
+            self._project_feet()
+            if relative is not None:
+                attach_object(conf.data, relative)
+                conf.update()
+            after = collisions.distances(conf.data)
+            if attempt == cfg.backtrack_steps or not np.any(after < floor - 1e-6):
+                return after
+            conf.update(q_prev)
+            alpha *= 0.5
+        return after  # not reached
 
     def _project_feet(self) -> None:
         """Remove the feet's second-order drift after a step: the least-norm dq with the feet rows exact.

@@ -28,6 +28,7 @@ __all__ = [
     "GeomPairCollisionLimit",
     "SupportPolygon",
     "SupportPolygonLimit",
+    "TiltLimit",
     "can_collide",
     "geom_pairs",
 ]
@@ -138,6 +139,33 @@ class SupportPolygonLimit(mink.Limit):
         return mink.Constraint(G=G, h=h)
 
 
+class TiltLimit(mink.Limit):
+    """A body's z axis stays within ``max_tilt`` (rad) of the world's vertical.
+
+    With ``z`` the body's z axis and ``e`` the world's, ``d(z . e)/dt = omega . (z x e)``,
+    so the row is ``-(z x e)^T J_rot dq <= gain (z . e - cos max_tilt)`` (the same
+    velocity-damper form as :class:`SupportPolygonLimit`). Rotations about the vertical
+    (a waist yaw) are not limited.
+    """
+
+    def __init__(self, model: mujoco.MjModel, body: int, max_tilt: float, gain: float = 0.5) -> None:
+        self.model = model
+        self.body = body
+        self.min_cos = float(np.cos(max_tilt))
+        self.gain = gain
+        self._jac = np.empty((3, model.nv))
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt
+        data = configuration.data
+        z = data.xmat[self.body].reshape(3, 3)[:, 2]
+        mujoco.mj_jacBody(self.model, data, None, self._jac, self.body)
+        axis = np.cross(z, [0.0, 0.0, 1.0])
+        G = -(axis @ self._jac)[None, :]
+        h = np.array([self.gain * (float(z[2]) - self.min_cos)])
+        return mink.Constraint(G=G, h=h)
+
+
 # --- collision pairs ------------------------------------------------------------------------
 
 
@@ -180,8 +208,9 @@ class GeomPairCollisionLimit(mink.Limit):
 
     For a pair at distance ``d < detection_distance`` with witness points p1, p2
     and unit normal n = (p2 - p1)/|p2 - p1|, the row is
-    ``-n^T (J_p2 - J_p1) dq <= gain (d - d_min)`` (0 once ``d <= d_min``): mink's
-    velocity damper, written for the displacement ``dq`` that mink's QP solves for.
+    ``-n^T (J_p2 - J_p1) dq <= gain (d - d_min)`` (0 once ``d <= d_min``; ``d_min`` one
+    value for all pairs or one per pair): mink's velocity damper, written for the
+    displacement ``dq`` that mink's QP solves for.
     ``attach`` maps a geom to the body whose Jacobian moves it (a carried object
     moves with the palm, not with its own free joint, whose dofs the planner freezes).
     """
@@ -190,14 +219,15 @@ class GeomPairCollisionLimit(mink.Limit):
         self,
         model: mujoco.MjModel,
         pairs: Sequence[tuple[int, int]],
-        min_distance: float,
+        min_distance: float | FloatArray,
         detection_distance: float,
         gain: float,
         attach: dict[int, int] | None = None,
     ) -> None:
         self.model = model
         self.pairs = np.array(pairs, dtype=int).reshape(-1, 2)
-        self.min_distance = min_distance
+        # One clearance for every pair, or one per pair.
+        self.min_distance = np.broadcast_to(np.asarray(min_distance, dtype=float), (len(self.pairs),)).copy()
         self.detection_distance = detection_distance
         self.gain = gain
         bodies = np.array(model.geom_bodyid, dtype=int)
@@ -252,7 +282,7 @@ class GeomPairCollisionLimit(mink.Limit):
             mujoco.mj_jac(model, data, jac1, None, fromto[:3], int(self.jac_body[g1]))
             mujoco.mj_jac(model, data, jac2, None, fromto[3:], int(self.jac_body[g2]))
             rows.append(-(normal @ (jac2 - jac1)))
-            gap = dist - self.min_distance
+            gap = dist - float(self.min_distance[i])
             # The QP variable of mink.build_ik is the displacement dq = v dt, so the damper bounds
             # the approach per step by gain * gap (mink's own limit divides by dt as well, which
             # for dt < 1 lets a step close more than the whole gap).

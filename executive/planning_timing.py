@@ -40,6 +40,7 @@ __all__ = [
     "normalise_quats",
     "path_parameter",
     "retime",
+    "zmp_path",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -111,17 +112,27 @@ def min_jerk(u: FloatArray) -> FloatArray:
 
 
 def path_parameter(
-    model: mujoco.MjModel, path: FloatArray, dof_index: NDArray[np.int_], limits: FloatArray
+    model: mujoco.MjModel,
+    path: FloatArray,
+    dof_index: NDArray[np.int_],
+    limits: FloatArray,
+    points: FloatArray | None = None,
+    point_speed: float = np.inf,
 ) -> FloatArray:
     """Cumulative ``s`` (s at full speed) of each path point: steps cost ``max_j |dq_j| / v_j``.
 
     Tangent-space steps come from ``mj_differentiatePos`` (as in mink's PostureTask).
+    ``points`` (N, P, 3): positions of P tracked points (the hands) at each path point; a
+    step costs at least ``max_p |dx_p| / point_speed`` too (a Cartesian speed limit).
     """
     s = np.zeros(len(path))
     dq = np.empty(model.nv)
     for i in range(1, len(path)):
         mujoco.mj_differentiatePos(model, dq, 1.0, path[i - 1], path[i])
-        s[i] = s[i - 1] + float(np.max(np.abs(dq[dof_index]) / limits))
+        cost = float(np.max(np.abs(dq[dof_index]) / limits))
+        if points is not None:
+            cost = max(cost, float(np.max(np.linalg.norm(points[i] - points[i - 1], axis=-1))) / point_speed)
+        s[i] = s[i - 1] + cost
     return s
 
 
@@ -177,22 +188,53 @@ def build_trajectory(
     relative: Relative | None,
     polygon: SupportPolygon,
     collisions: GeomPairCollisionLimit,
-    clearance0: FloatArray,
+    floor: FloatArray,
 ) -> Trajectory:
-    """Re-time an IK path and check every knot: clearance (as at the start, or min_distance) and balance.
+    """Re-time an IK path and check every knot: clearance and balance.
+
+    ``floor`` (m, one per collision pair) is the distance each pair must keep: its required
+    clearance, or its distance at the start when it starts closer.
 
     A carried object is re-attached to its hand at every knot, so it moves rigidly with it.
     """
-    s_path = path_parameter(model, path, joints.dofs, joints.limits)
+    # The hands' (and so a carried object's) speed is bounded too: the servos' tracking error
+    # grows with it, and clearance is planned against that error.
+    sites = list(frames.hand_sites.values())
+    scratch = mujoco.MjData(model)
+    points = np.empty((len(path), len(sites), 3))
+    for i, q in enumerate(path):
+        scratch.qpos[:] = q
+        mujoco.mj_kinematics(model, scratch)
+        points[i] = scratch.site_xpos[sites]
+    s_path = path_parameter(model, path, joints.dofs, joints.limits, points, cfg.hand_speed)
     # Tangential acceleration a = |dq/ds| s'' <= v s'': bound s'' by a / v (v the largest limit).
     ratio = cfg.acceleration_limit / float(np.max(joints.limits))
-    times, s_knots = retime(float(s_path[-1]), ratio, cfg.knot_spacing, cfg.max_knots, cfg.min_duration)
-    qpos = interpolate_path(path, s_path, s_knots, frames.quat_adr)
     data = mujoco.MjData(model)
+    duration = cfg.min_duration
+    for _ in range(cfg.zmp_retime_rounds):
+        times, s_knots = retime(float(s_path[-1]), ratio, cfg.knot_spacing, cfg.max_knots, duration)
+        qpos = interpolate_path(path, s_path, s_knots, frames.quat_adr)
+        com = _com_path(model, data, qpos, relative, frames.base_body)
+        zmp = zmp_path(times, com)
+        worst_zmp = min(polygon.margin(p) for p in zmp)
+        # A CoM held near the edge cannot have its ZMP further in than itself: then ask for less.
+        needed = min(cfg.zmp_margin, min(polygon.margin(c) for c in com) - 0.005)
+        if worst_zmp >= needed or float(s_path[-1]) == 0.0:
+            break
+        # The CoM's acceleration scales with 1/T^2 on the same path: stretch and check again.
+        duration = float(times[-1]) * cfg.zmp_stretch
+    else:
+        raise PlanningError(
+            name,
+            None,
+            0.0,
+            0.0,
+            len(path) - 1,
+            f"motion '{name}': the zero-moment point comes {worst_zmp:.4f} m from the support polygon's "
+            f"edge even at {times[-1]:.1f} s (needs {needed:.3f} m)",
+        )
     hands = {s: np.empty((len(times), 3)) for s in frames.hand_sites}
-    com = np.empty((len(times), 3))
-    # Pairs must keep min_distance, or (when they start closer) not come closer than at the start.
-    floor = np.minimum(clearance0, cfg.min_distance) - cfg.clearance_tolerance
+    floor = np.asarray(floor, dtype=float) - cfg.clearance_tolerance
     for k in range(len(times)):
         data.qpos[:] = qpos[k]
         mujoco.mj_kinematics(model, data)
@@ -200,10 +242,8 @@ def build_trajectory(
             attach_object(data, relative)
             qpos[k] = data.qpos
             mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
         for s, site in frames.hand_sites.items():
             hands[s][k] = data.site_xpos[site]
-        com[k] = data.subtree_com[frames.base_body]
         gaps = collisions.distances(data) - floor
         if np.any(gaps < 0):
             i = int(np.argmin(gaps))
@@ -215,7 +255,8 @@ def build_trajectory(
                 0.0,
                 len(path) - 1,
                 f"motion '{name}': geoms '{g1}' and '{g2}' come within "
-                f"{gaps[i] + floor[i]:.4f} m at t = {times[k]:.2f} s (clearance {cfg.min_distance:.3f} m)",
+                f"{gaps[i] + floor[i]:.4f} m at t = {times[k]:.2f} s "
+                f"(clearance {floor[i] + cfg.clearance_tolerance:.3f} m)",
             )
     worst = min(polygon.margin(c) for c in com)
     if worst < cfg.support_margin - 1e-9:
@@ -229,3 +270,40 @@ def build_trajectory(
             f"(needs {cfg.support_margin:.3f} m)",
         )
     return Trajectory(name, times, qpos, hands, com, carried, frames.quat_adr)
+
+
+def _com_path(
+    model: mujoco.MjModel, data: mujoco.MjData, qpos: FloatArray, relative: Relative | None, base_body: int
+) -> FloatArray:
+    """Whole-robot CoM at every knot (a carried object re-attached to its hand first)."""
+    com = np.empty((len(qpos), 3))
+    for k, q in enumerate(qpos):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        if relative is not None:
+            attach_object(data, relative)
+            mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        com[k] = data.subtree_com[base_body]
+    return com
+
+
+def zmp_path(times: FloatArray, com: FloatArray, window: float = 0.1, gravity: float = 9.81) -> FloatArray:
+    """Zero-moment point xy of a CoM path on flat ground (linear inverted pendulum).
+
+    ``p = c_xy - (c_z / g) c''_xy``; the acceleration is a central difference over
+    ``window`` seconds (the servos do not follow faster wiggles of the piecewise-linear
+    path anyway), one-sided at the ends, where the min-jerk profile starts and stops at rest.
+    """
+    n = len(times)
+    if n < 3:
+        return np.asarray(com[:, :2], dtype=float)
+    dt = float(times[-1] - times[0]) / (n - 1)
+    h = max(1, min(round(window / dt), (n - 1) // 2))
+    idx = np.arange(n)
+    lo, hi = np.clip(idx - h, 0, n - 1), np.clip(idx + h, 0, n - 1)
+    # Central second difference where both neighbours exist; zero-padded (at rest) outside.
+    before = np.where((idx - h >= 0)[:, None], com[lo, :2], com[0, :2])
+    after = np.where((idx + h <= n - 1)[:, None], com[hi, :2], com[-1, :2])
+    acc = (after - 2.0 * com[:, :2] + before) / (h * dt) ** 2
+    return np.asarray(com[:, :2] - (com[:, 2:3] / gravity) * acc, dtype=float)

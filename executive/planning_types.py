@@ -100,14 +100,27 @@ class PlannerConfig:
         feet_tolerance: after each step the feet's pose error (m + rad, mink FrameTask
             error) is projected out until below this.
         hand_position_cost, hand_orientation_cost: FrameTask costs of a moving hand.
+        lead_distance (m), lead_angle_rad: a hand task's target is at most this far ahead
+            of the hand on the straight way to its goal (so the hand moves along a line).
         idle_arm_cost: PostureTask cost holding an idle arm's joints at their start angles.
         com_cost: ComTask cost on x and y (none on z).
         posture_leg_cost, posture_waist_cost, posture_arm_cost: PostureTask per joint group.
+        posture_gain: the PostureTask's gain (mink): the fraction of the posture error it asks
+            to remove per step, so the body drifts back gently instead of lunging (a lunge of the
+            legs or waist swings the CoM, and the timing then slows the whole move down).
     Balance and clearance:
         support_margin: the CoM xy stays this far inside the feet's support polygon (m).
-        min_distance: clearance kept between avoided geom pairs (m).
+        max_torso_tilt_deg: the torso's z axis stays within this angle of the vertical
+            (a lean, not a bow: the CoM stays over the feet by the waist and arm choices).
+        min_distance: clearance kept between avoided geom pairs (m): the robot and a carried
+            object against obstacles, other objects and the robot itself. It must exceed the
+            servos' tracking error at the hands.
+        table_distance: the smaller clearance kept between the robot and the table (m): a
+            top-down grasp of a flat object brings the fingertips close to the table top.
         detection_distance: pairs closer than this enter the QP (m).
         collision_gain: mink's velocity-damper gain of the collision rows.
+        backtrack_steps: an IK step that leaves a pair closer than ``min_distance`` (the
+            rows are first order) is halved up to this many times.
         clearance_tolerance: the timed trajectory is checked at every knot; a pair closer
             than min_distance minus this (m) is a PlanningError.
         via_clearance: a hand whose straight way is blocked by an obstacle or object
@@ -116,13 +129,18 @@ class PlannerConfig:
     Timing:
         leg_velocity, waist_velocity, arm_velocity: joint velocity limits (rad/s).
         velocity_scale: fraction of those limits the timed trajectory uses.
+        hand_speed: bound on each hand site's speed along the timed path (m/s).
         acceleration_limit: bound on the tangential joint acceleration (rad/s^2).
         knot_spacing (s), max_knots, min_duration (s): the knot grid.
+        zmp_margin (m): the zero-moment point of the timed CoM path (linear inverted
+            pendulum, CoM acceleration over 0.1 s) stays this far inside the support
+            polygon; a motion too brisk for that is slowed down by ``zmp_stretch`` per
+            round, at most ``zmp_retime_rounds`` rounds (then a PlanningError).
     """
 
     position_tolerance: float = 0.002
     angle_tolerance_rad: float = float(np.radians(1.0))
-    max_iterations: int = 300
+    max_iterations: int = 600
     relax_iterations: int = 8
     relax_factor: float = 0.1
     relax_floor: float = 1e-3
@@ -133,26 +151,37 @@ class PlannerConfig:
     damping: float = 1e-3
     hand_position_cost: float = 50.0
     hand_orientation_cost: float = 20.0
+    lead_distance: float = 0.02
+    lead_angle_rad: float = float(np.radians(5.0))
     idle_arm_cost: float = 10.0
     com_cost: float = 30.0
-    posture_leg_cost: float = 5.0
-    posture_waist_cost: float = 5.0
+    posture_leg_cost: float = 100.0
+    posture_waist_cost: float = 20.0
     posture_arm_cost: float = 0.1
+    posture_gain: float = 0.2
+    hold_body: bool = False
     support_margin: float = 0.02
-    min_distance: float = 0.01
+    max_torso_tilt_deg: float = 20.0
+    min_distance: float = 0.02
+    table_distance: float = 0.01
     detection_distance: float = 0.10
     clearance_tolerance: float = 0.002
     collision_gain: float = 0.5
+    backtrack_steps: int = 4
     via_clearance: float = 0.04
     via_tolerance: float = 0.03
     leg_velocity: float = 2.0
     waist_velocity: float = 1.5
     arm_velocity: float = 2.0
     velocity_scale: float = 0.5
+    hand_speed: float = 0.25
     acceleration_limit: float = 2.0
     knot_spacing: float = 0.02
     max_knots: int = 300
     min_duration: float = 0.2
+    zmp_margin: float = 0.02
+    zmp_stretch: float = 1.25
+    zmp_retime_rounds: int = 12
 
 
 @dataclass(frozen=True)

@@ -30,6 +30,8 @@ from executive.world import World, build
 TABLE_Z = 0.80
 BOOK_XY = np.array([0.48, 0.26])
 TARGET_XY = np.array([0.48, -0.26])
+# The hand site 3.5 cm above the table: the fingertips (2 cm below the site) 1.5 cm above it,
+# inside the book's 5 cm; above the robot's clearance to the table (PlannerConfig.table_distance).
 GRASP_Z = TABLE_Z + 0.035
 TOP_DOWN = hand_top_down_quat((0.0, 1.0, 0.0))
 SHRINK = 0.02
@@ -146,7 +148,9 @@ def _check_trajectory(
     start = _kin(world, traj.qpos[0])
     feet = [mujoco.mj_name2id(model, BODY, f"{s}_foot") for s in ("left", "right")]
     lo, hi = _support_rectangle(world, start)
-    env = [_gid(world, "table_top"), _gid(world, "book_stack")]
+    # The robot keeps table_distance from the table (a top-down grasp comes close to it) and
+    # min_distance from the obstacles.
+    env = {_gid(world, "table_top"): cfg.table_distance, _gid(world, "book_stack"): cfg.min_distance}
     allowed = {_gid(world, n) for n in allow}
     arms = [g for s in ("left", "right") for g in _arm_geoms(world, s)]
     margins = []
@@ -163,10 +167,10 @@ def _check_trajectory(
                 qj = q[model.jnt_qposadr[j]]
                 assert model.jnt_range[j, 0] - 1e-6 <= qj <= model.jnt_range[j, 1] + 1e-6
         for a in arms:
-            for e in env:
+            for e, clearance in env.items():
                 if a in allowed or e in allowed:
                     continue
-                assert _distance(world, data, a, e) > cfg.min_distance - 0.002
+                assert _distance(world, data, a, e) > clearance - 0.002
     # Joint speeds by finite differences of the knots.
     dt = np.diff(traj.times)
     for name, limit in planner.velocity_limits.items():
@@ -317,13 +321,47 @@ def test_handover_in_line_is_infeasible(world: World, planner: Planner) -> None:
 # ----------------------------------------------------------------------------- 4. unreachable
 
 
-def _reference_reach(world: World, target: np.ndarray) -> float:
+class _TorsoTilt(mink.Limit):
+    """The torso's z axis within ``max_tilt`` of the vertical, its Jacobian by finite differences.
+
+    Row: ``-grad(z_z) dq <= 0.5 (z_z - cos max_tilt)``, ``z_z`` the world-z component of the
+    torso's z axis, its gradient by central differences of ``mj_kinematics`` (independent of
+    the planner's analytic TiltLimit).
+    """
+
+    def __init__(self, model: mujoco.MjModel, max_tilt: float, eps: float = 1e-6) -> None:
+        self.model, self.eps = model, eps
+        self.min_cos = float(np.cos(max_tilt))
+        self.torso = int(mujoco.mj_name2id(model, BODY, "torso"))
+        self.scratch = mujoco.MjData(model)
+
+    def _zz(self, q: np.ndarray) -> float:
+        self.scratch.qpos[:] = q
+        mujoco.mj_kinematics(self.model, self.scratch)
+        return float(self.scratch.xmat[self.torso][8])
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        model, q = self.model, configuration.q
+        grad = np.zeros(model.nv)
+        dq = np.zeros(model.nv)
+        for i in range(model.nv):
+            dq[i] = self.eps
+            plus, minus = q.copy(), q.copy()
+            mujoco.mj_integratePos(model, plus, dq, 1.0)
+            mujoco.mj_integratePos(model, minus, -dq, 1.0)
+            grad[i] = (self._zz(plus) - self._zz(minus)) / (2 * self.eps)
+            dq[i] = 0.0
+        return mink.Constraint(G=-grad[None, :], h=np.array([0.5 * (self._zz(q) - self.min_cos)]))
+
+
+def _reference_reach(world: World, target: np.ndarray, max_tilt_deg: float) -> float:
     """Closest the left hand site gets to ``target`` (any orientation), feet fixed, CoM at the polygon's edge.
 
     Plain mink (as in tests/test_humanoid_model.py), no collision avoidance: the hand
     goal moves at most 5 cm ahead of the hand per step (so the stretched body does not
-    fold up), and a stiff ComTask holds the CoM at the front edge of the support
-    rectangle shrunk by 2 cm, the furthest the planner may lean.
+    fold up), a stiff ComTask holds the CoM at the front edge of the support
+    rectangle shrunk by 2 cm, the furthest the planner may lean, and the torso may tilt
+    at most ``max_tilt_deg`` from the vertical, as the planner's.
     """
     model = world.model
     conf = mink.Configuration(model)
@@ -341,6 +379,7 @@ def _reference_reach(world: World, target: np.ndarray) -> float:
     posture.set_target(world.home_qpos())
     frozen = mink.DofFreezingTask(model, dof_indices=list(range(model.nv - 6, model.nv)))  # the book
     site = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "left_hand")
+    tilt = _TorsoTilt(model, np.radians(max_tilt_deg))
     best = np.inf
     for _ in range(400):
         here = conf.data.site_xpos[site].copy()
@@ -353,7 +392,7 @@ def _reference_reach(world: World, target: np.ndarray) -> float:
             0.02,
             solver="daqp",
             damping=1e-3,
-            limits=[mink.ConfigurationLimit(model)],
+            limits=[mink.ConfigurationLimit(model), tilt],
             constraints=[*feet, frozen],
         )
         conf.integrate_inplace(vel, 0.02)
@@ -366,7 +405,7 @@ def test_unreachable_target_raises(world: World, planner: Planner) -> None:
     with pytest.raises(PlanningError) as info:
         planner.move(world.home_qpos(), [_target("left", target)], name="left.far")
     err = info.value
-    reference = _reference_reach(world, target)
+    reference = _reference_reach(world, target, planner.config.max_torso_tilt_deg)
     print(
         f"unreachable: planner {err.position_error:.3f} m short, "
         f"reference best reach {reference:.3f} m; {err}"

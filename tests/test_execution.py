@@ -1,0 +1,105 @@
+"""Executing planned alternatives of the book transfer in physics (executive/runner.py).
+
+Outcomes are measured here from the truth world's MuJoCo data (the book body's
+xpos/xquat, the pelvis height, the torso's z axis), not taken from the runner's
+own report.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from executive.composition import plan_alternative
+from executive.planning import Planner
+from executive.runner import RunResult, execute_plan
+from executive.scenario import load
+from executive.world import Perturbation, World, build
+
+SCENARIO = "book_transfer"
+
+
+def _yaw(quat: np.ndarray) -> float:
+    w, x, y, z = quat
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def _run(
+    alternative: str, perturbation: Perturbation | None = None
+) -> tuple[RunResult, World, dict[str, float]]:
+    scenario = load(SCENARIO)
+    task = scenario.mission[0]
+    estimate = build(scenario)
+    truth = build(scenario) if perturbation is None else build(scenario, perturbation, kind="truth")
+    book = truth.ids.object_bodies["book"]
+    start = {
+        "pelvis_z": float(truth.data.xpos[truth.ids.base_body][2]),
+        "book_yaw": _yaw(truth.data.xquat[book]),
+    }
+    plan = plan_alternative(Planner(estimate), estimate, task, alternative)
+    return execute_plan(plan, truth, task), truth, start
+
+
+def _check_success(alternative: str) -> None:
+    result, truth, start = _run(alternative)
+    scenario = load(SCENARIO)
+    task = scenario.mission[0]
+    data = truth.data
+    book = truth.ids.object_bodies["book"]
+    err = float(np.hypot(data.xpos[book][0] - task.to[0], data.xpos[book][1] - task.to[1]))
+    dyaw = math.degrees(abs(math.remainder(_yaw(data.xquat[book]) - start["book_yaw"], 2 * math.pi)))
+    pelvis_drop = start["pelvis_z"] - float(data.xpos[truth.ids.base_body][2])
+    tilt = math.degrees(math.acos(min(1.0, float(data.xmat[truth.ids.torso_body][8]))))
+    print(
+        f"{alternative}: {result.outcome} ({result.message}); planned {result.planned_duration_s:.1f} s, "
+        f"simulated {result.sim_time_s:.1f} s in {result.wall_s:.1f} s wall "
+        f"(x{result.real_time_factor:.1f}); "
+        f"book {err * 1000:.1f} mm / {dyaw:.1f} deg off; pelvis {pelvis_drop * 1000:.1f} mm lower; "
+        f"torso tilt {tilt:.1f} deg"
+    )
+    assert result.success, result.message
+    assert result.failure is None
+    assert err < 0.02 and dyaw < 10.0
+    assert abs(pelvis_drop) < 0.05 and tilt < 10.0
+
+
+@pytest.mark.slow
+def test_left_succeeds_with_exact_truth() -> None:
+    _check_success("left")
+
+
+@pytest.mark.slow
+def test_right_succeeds_with_exact_truth() -> None:
+    _check_success("right")
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(
+    reason="known: the book is placed within 2 cm but turned by a half turn. Top-down jaws on an "
+    "across-the-body handover: the giver's wrist turns it a quarter turn clockwise (forearm from its "
+    "side), and the receiver's natural way back (forearm from behind) is another quarter turn "
+    "clockwise; the other way puts the receiver's arm at its joint limits and does not plan",
+    strict=False,
+)
+def test_left_to_right_succeeds_with_exact_truth() -> None:
+    _check_success("left_to_right")
+
+
+@pytest.mark.slow
+def test_displaced_book_fails_and_names_the_cause() -> None:
+    """The truth book 6 cm nearer the stack than the estimate: the left pick must fail, saying why."""
+    result, truth, _ = _run("left", Perturbation(object_offsets={"book": (0.0, -0.06, 0.0)}))
+    print(f"displaced book, left: {result.outcome}: {result.message}")
+    assert not result.success
+    assert result.outcome == "failed"
+    text = result.message.lower()
+    # The jaws come down on the displaced book, hit the stack, fail to hold it, or drop it.
+    named = "collision" in text and ("book_stack" in text or "touched book" in text)
+    named = named or "does not hold" in text or "drop" in text
+    assert named, result.message
+    if result.failure is not None:
+        assert result.failure.mode in ("collision", "drop")
+    # The failure happened in physics, not in a later check: the world stopped there.
+    assert truth.data.time < result.planned_duration_s + 10.0
