@@ -86,7 +86,9 @@ def execute_plan(
     result.physics_wall_s = robot.stats.physics_wall_s
     result.sim_time_s = float(truth.data.time)
     if root.status == Status.SUCCESS:
-        target_yaw = task.to_yaw_rad
+        # No target yaw in the task means: keep the object's yaw (scenario_types.TransferTask).
+        nominal = next(b for b in truth.scenario.scene.objects if b.name == task.object)
+        target_yaw = task.to_yaw_rad if task.to_yaw_rad is not None else nominal.orientation_rad[2]
         placed = robot.detector.check_placed(task.object, (task.to[0], task.to[1]), target_yaw)
         pos = truth.data.xpos[truth.ids.object_bodies[task.object]]
         result.placement_error_m = float(np.hypot(pos[0] - task.to[0], pos[1] - task.to[1]))
