@@ -25,13 +25,7 @@ import numpy as np
 
 from executive.composition import AlternativePlan, plan_alternative
 from executive.planning import Planner, PlanningError, Trajectory
-from executive.risk.collision import (
-    CollisionModel,
-    KnotDistance,
-    collision_probability,
-    instantaneous_risk,
-    seed_collision_score,
-)
+from executive.risk.collision import CollisionModel, CollisionProfile, KnotDistance, report_from_profile
 from executive.risk.combine import CombinedRisk, combine
 from executive.risk.fall import assess_fall
 from executive.risk.grasp import assess_grasp, hand_pose_at
@@ -80,7 +74,7 @@ def concatenate(trajectories: list[Trajectory], name: str) -> Trajectory:
 
 
 def _collision(model: CollisionModel, plan: AlternativePlan) -> RiskReport:
-    config = model.risk_config
+    """One distance profile through every motion step, each with its own allowances."""
     obj = plan.task.object
     times: list[np.ndarray] = []
     knots: list[KnotDistance] = []
@@ -99,37 +93,7 @@ def _collision(model: CollisionModel, plan: AlternativePlan) -> RiskReport:
         times.append(profile.times + offset)
         knots.extend(profile.knots)
         offset += traj.duration
-    t = np.concatenate(times)
-    distances = np.array([k.distance for k in knots])
-    seed = seed_collision_score(t, distances, config.d_safety, config.collision)
-    prob = collision_probability([k.near for k in knots], model.setup.env_sigma)
-    k_min = int(np.argmin(distances))
-    closest = knots[k_min]
-    part, factor = model.body_part(closest.robot_geom)
-    return RiskReport(
-        mode="collision",
-        probability=prob.probability,
-        probability_bounds=(prob.lower, prob.upper),
-        severity=float(config.severity.collision) * factor,
-        seed_score=seed.score,
-        times=t,
-        traces={
-            "distance": distances,
-            "instantaneous_risk": np.asarray(
-                instantaneous_risk(distances, config.d_safety, config.collision.exponent), dtype=float
-            ),
-            "probability": prob.per_knot,
-        },
-        details={
-            "min_distance": float(closest.distance),
-            "min_distance_time": float(t[k_min]),
-            "closest_robot_body": closest.robot_body_name,
-            "closest_env_body": closest.env_body_name,
-            "body_part": part,
-            "peak_term": seed.peak,
-            "exposure_term": seed.exposure,
-        },
-    )
+    return report_from_profile(model, CollisionProfile(np.concatenate(times), tuple(knots)))
 
 
 def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionModel) -> CombinedRisk:

@@ -80,6 +80,7 @@ __all__ = [
     "gaussian_union_probability",
     "instantaneous_risk",
     "monte_carlo_collision_probability",
+    "report_from_profile",
     "seed_collision_score",
 ]
 
@@ -767,13 +768,17 @@ def assess_collision(
     allow: Allow = (),
     broad_phase: bool = True,
 ) -> RiskReport:
-    """Collision risk of ``trajectory``: seed score, first-order P(collision) and severity.
+    """Collision risk of ``trajectory``: seed score, first-order P(collision) and severity."""
+    return report_from_profile(model, model.profile(trajectory, allow=allow, broad_phase=broad_phase))
+
+
+def report_from_profile(model: CollisionModel, prof: CollisionProfile) -> RiskReport:
+    """The collision RiskReport of a distance profile (one trajectory, or several steps joined).
 
     Severity = ``severity.collision`` x the body-part factor of the robot body in the
     closest approach (Long et al. 2018, conclusion: more sensitive parts such as cameras
-    weigh more). Probability: see the module doc (first order, union bounds).
+    weigh more). Probability: see the module doc (first order, union over all knots).
     """
-    prof = model.profile(trajectory, allow=allow, broad_phase=broad_phase)
     config = model.risk_config
     distances = prof.distances
     seed = seed_collision_score(prof.times, distances, config.d_safety, config.collision)
