@@ -32,7 +32,9 @@ __all__ = [
     "WorldIds",
     "build",
     "build_pair",
+    "is_descendant",
     "sample_perturbation",
+    "subtree_bodies",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -427,11 +429,13 @@ def _need(model: mujoco.MjModel, objtype: mujoco.mjtObj, name: str, what: str, p
     return int(idx)
 
 
-def _subtree(model: mujoco.MjModel, root: int) -> tuple[int, ...]:
-    return tuple(b for b in range(model.nbody) if _is_descendant(model, b, root))
+def subtree_bodies(model: mujoco.MjModel, root: int) -> tuple[int, ...]:
+    """Every body in the kinematic subtree rooted at ``root`` (root included)."""
+    return tuple(b for b in range(model.nbody) if is_descendant(model, b, root))
 
 
-def _is_descendant(model: mujoco.MjModel, body: int, root: int) -> bool:
+def is_descendant(model: mujoco.MjModel, body: int, root: int) -> bool:
+    """True when ``body`` is ``root`` or below it (every body descends from the world, 0)."""
     while body > 0:
         if body == root:
             return True
@@ -454,7 +458,7 @@ def _collect_ids(
         mujoco.mjtObj.mjOBJ_ACTUATOR,
     )
     base = _need(model, body, profile.base_body, "base_body", profile)
-    robot_bodies = _subtree(model, base)
+    robot_bodies = subtree_bodies(model, base)
     robot_geoms = tuple(
         g
         for g in range(model.ngeom)
@@ -467,7 +471,9 @@ def _collect_ids(
     for side, arm in profile.arms.items():
         site_name = arm.hand.site or f"executive_{side}_hand"
         hand_sites[side] = _need(model, site, site_name, f"{side} hand site", profile)
-        hand_bodies[side] = _subtree(model, _need(model, body, arm.hand_body, f"{side} hand_body", profile))
+        hand_bodies[side] = subtree_bodies(
+            model, _need(model, body, arm.hand_body, f"{side} hand_body", profile)
+        )
         arm_joints[side] = tuple(_need(model, joint, j, f"{side} arm joint", profile) for j in arm.joints)
         grippers[side] = tuple(
             _need(model, act, a, f"{side} gripper actuator", profile) for a in arm.gripper.actuators

@@ -61,7 +61,7 @@ from executive.errors import ExecutiveError
 from executive.risk.report import RiskReport
 from executive.risk.shapes import coal_geometry
 from executive.scenario_types import CollisionRiskConfig, RiskConfig, Uncertainty
-from executive.world import World
+from executive.world import World, is_descendant
 
 __all__ = [
     "Allow",
@@ -353,7 +353,7 @@ class CollisionSetup:
         robot_bodies = set(ids.robot_bodies)
         parts: dict[str, set[int]] = {}
         if ids.head_body is not None:
-            parts["head"] = {b for b in robot_bodies if _descends(model, b, ids.head_body)}
+            parts["head"] = {b for b in robot_bodies if is_descendant(model, b, ids.head_body)}
         parts["hand"] = {b for bodies in ids.hand_bodies.values() for b in bodies}
         forearms = {arm.forearm_body for arm in world.profile.arms.values() if arm.forearm_body}
         parts["forearm"] = {int(model.body(name).id) for name in forearms}
@@ -362,7 +362,7 @@ class CollisionSetup:
             bodies = parts.get(name)
             if bodies is None:  # any other part name: a robot body of that name and its subtree
                 found = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, name)
-                bodies = {b for b in robot_bodies if found >= 0 and _descends(model, b, found)}
+                bodies = {b for b in robot_bodies if found >= 0 and is_descendant(model, b, found)}
             for b in bodies:
                 if b not in factors or factor > factors[b][1]:
                     factors[b] = (name, float(factor))
@@ -379,14 +379,6 @@ class CollisionSetup:
             hand_geoms=hands,
             support_geoms=tuple(g for g in ids.table_geoms if g >= 0),
         )
-
-
-def _descends(model: mujoco.MjModel, body: int, root: int) -> bool:
-    while body > 0:
-        if body == root:
-            return True
-        body = int(model.body_parentid[body])
-    return root == 0
 
 
 @dataclass(frozen=True)
