@@ -53,6 +53,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.planning_limits import (
+    ConfigurationLimit,
     GeomPairCollisionLimit,
     SupportPolygon,
     SupportPolygonLimit,
@@ -166,7 +167,7 @@ class Planner:
         if ids.base_body != 1:
             raise PlanningInputError(f"the robot's base must be body 1 of the model, not {ids.base_body}")
         self.static_limits: list[mink.Limit] = [
-            mink.ConfigurationLimit(model),
+            ConfigurationLimit(model),
             mink.VelocityLimit(model, velocity),
         ]
         self.tilt = TiltLimit(model, ids.torso_body, float(np.radians(cfg.max_torso_tilt_deg)))

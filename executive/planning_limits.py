@@ -25,6 +25,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 __all__ = [
+    "ConfigurationLimit",
     "GeomPairCollisionLimit",
     "SupportPolygon",
     "SupportPolygonLimit",
@@ -164,6 +165,21 @@ class TiltLimit(mink.Limit):
         G = -(axis @ self._jac)[None, :]
         h = np.array([self.gain * (float(z[2]) - self.min_cos)])
         return mink.Constraint(G=G, h=h)
+
+
+class ConfigurationLimit(mink.ConfigurationLimit):
+    """mink's joint range limit, except that a joint outside its range goes no further out.
+
+    mink asks such a joint to move back into range within the step (a negative bound),
+    which contradicts a frozen dof's ``dq = 0`` (a robot's own keyframe may hold a finger
+    a little past its range): the bounds are clipped at zero instead.
+    """
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        constraint = super().compute_qp_inequalities(configuration, dt)
+        if constraint.h is None:
+            return constraint
+        return mink.Constraint(G=constraint.G, h=np.maximum(constraint.h, 0.0))
 
 
 # --- collision pairs ------------------------------------------------------------------------
