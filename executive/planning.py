@@ -75,7 +75,7 @@ from executive.planning_types import (
     se3,
     site_pose,
 )
-from executive.world import World
+from executive.world import World, is_descendant
 
 __all__ = [
     "HandTarget",
@@ -185,7 +185,7 @@ class Planner:
         self.arm_geoms: dict[str, list[int]] = {}
         for side in self.sides:
             root = int(model.jnt_bodyid[ids.arm_joints[side][0]])
-            subtree = {b for b in ids.robot_bodies if _descends(model, b, root)}
+            subtree = {b for b in ids.robot_bodies if is_descendant(model, b, root)}
             self.arm_geoms[side] = [g for g in ids.robot_geoms if int(model.geom_bodyid[g]) in subtree]
         in_arms = {g for gs in self.arm_geoms.values() for g in gs}
         self.body_geoms = [g for g in ids.robot_geoms if g not in in_arms]
@@ -543,11 +543,3 @@ class Planner:
 
 
 # --- small helpers --------------------------------------------------------------------------
-
-
-def _descends(model: mujoco.MjModel, body: int, root: int) -> bool:
-    while body > 0:
-        if body == root:
-            return True
-        body = int(model.body_parentid[body])
-    return False
