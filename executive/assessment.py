@@ -21,6 +21,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
 from executive.composition import AlternativePlan, plan_alternative
@@ -28,7 +29,7 @@ from executive.planning import Planner, PlanningError, Trajectory
 from executive.risk.collision import CollisionModel, CollisionProfile, KnotDistance, report_from_profile
 from executive.risk.combine import CombinedRisk, combine
 from executive.risk.fall import assess_fall
-from executive.risk.grasp import assess_grasp, hand_pose_at
+from executive.risk.grasp import GraspTolerance, assess_grasp, grasp_error, grasp_tolerance, hand_pose_at
 from executive.risk.report import RiskReport
 from executive.scenario_types import TransferTask
 from executive.world import World
@@ -105,9 +106,40 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
     collision = _collision(collision_model, plan)
     grasp_step = next(s for s in plan.steps if s.kind == "grasp")
     approach = [s for s in plan.steps[: plan.steps.index(grasp_step)] if s.name in plan.trajectories][-1]
-    pose = hand_pose_at(world, plan.trajectories[approach.name], grasp_step.side)
-    grasp = assess_grasp(world, grasp_step.side, plan.task.object, pose, scenario.risk, scenario.uncertainty)
+    grasp = _grasp(world, grasp_step.side, plan.task.object, plan.trajectories[approach.name])
     return combine([collision, fall, grasp], scenario.risk)
+
+
+def _grasp(world: World, side: str, obj: str, approach: Trajectory) -> RiskReport:
+    """Grasp risk measured from the grasp point the plan intends, not the object's centre.
+
+    A handover grasps the object off-centre on purpose; that planned offset is no error,
+    but it uses up part of the geometric tolerance along the same axis.
+    """
+    scenario = world.scenario
+    hand_pos, hand_rot = hand_pose_at(world, approach, side)
+    obj_pos, obj_quat = world.object_pose(obj)
+    rotation = np.zeros(9)
+    mujoco.mju_quat2Mat(rotation, obj_quat)
+    planned = grasp_error(hand_pos, hand_rot, obj_pos, rotation.reshape(3, 3))
+    full = grasp_tolerance(world, side, obj)
+    tolerance = GraspTolerance(
+        max(0.0, full.closing - abs(planned.closing)),
+        max(0.0, full.lateral - abs(planned.lateral)),
+        max(0.0, full.yaw - abs(planned.yaw)),
+    )
+    # The intended grasp point: where the hand is, at the object's height.
+    reference = np.array([hand_pos[0], hand_pos[1], obj_pos[2]])
+    return assess_grasp(
+        world,
+        side,
+        obj,
+        (hand_pos, hand_rot),
+        scenario.risk,
+        scenario.uncertainty,
+        object_pose=(reference, obj_quat),
+        tolerance=tolerance,
+    )
 
 
 def assess_task(
