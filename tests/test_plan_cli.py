@@ -38,3 +38,9 @@ def test_plan_json_lists_every_alternative_with_probabilities(tmp_path: Path) ->
         assert (tmp_path / "task0" / f"{alt['name']}_distance.png").is_file()
     chosen = next(a for a in feasible if a["chosen"])
     assert chosen["risk"]["expected_loss"] == min(a["risk"]["expected_loss"] for a in feasible)
+    # The seed study's finding: the handover keeps farthest from the stack and is the least risky.
+    assert chosen["name"] == "left_to_right"
+    risk = {a["name"]: a["risk"] for a in feasible}
+    for one_arm in ("left", "right"):
+        assert risk["left_to_right"]["combined"] < risk[one_arm]["combined"]
+        assert risk["left_to_right"]["weighted_sum"] < risk[one_arm]["weighted_sum"]
