@@ -24,6 +24,8 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.polygon import convex_hull, halfplanes
+
 __all__ = [
     "ConfigurationLimit",
     "GeomPairCollisionLimit",
@@ -54,13 +56,8 @@ class SupportPolygon:
 
     @classmethod
     def from_points(cls, points: FloatArray) -> SupportPolygon:
-        hull = _convex_hull(np.asarray(points, dtype=float)[:, :2])
-        nxt = np.roll(hull, -1, axis=0)
-        edge = nxt - hull
-        # Counter-clockwise hull: the outward normal of edge (dx, dy) is (dy, -dx).
-        normals = np.stack([edge[:, 1], -edge[:, 0]], axis=1)
-        normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-        offsets = np.einsum("ij,ij->i", normals, hull)
+        hull = convex_hull(np.asarray(points, dtype=float)[:, :2])
+        normals, offsets = halfplanes(hull)
         return cls(hull, normals, offsets)
 
     @classmethod
@@ -89,28 +86,6 @@ class SupportPolygon:
     def margin(self, point: FloatArray) -> float:
         """Signed distance (m) from ``point`` (xy) to the nearest edge line; positive inside."""
         return float(np.min(self.offsets - self.normals @ np.asarray(point, dtype=float)[:2]))
-
-
-def _convex_hull(points: FloatArray) -> FloatArray:
-    """Counter-clockwise convex hull (Andrew's monotone chain), no repeated end point."""
-    pts = np.unique(np.round(points, 12), axis=0)
-    if len(pts) < 3:
-        return pts
-
-    def cross(o: FloatArray, a: FloatArray, b: FloatArray) -> float:
-        return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
-
-    lower: list[FloatArray] = []
-    for p in pts:
-        while len(lower) >= 2 and cross(lower[-2], lower[-1], p) <= 0:
-            lower.pop()
-        lower.append(p)
-    upper: list[FloatArray] = []
-    for p in pts[::-1]:
-        while len(upper) >= 2 and cross(upper[-2], upper[-1], p) <= 0:
-            upper.pop()
-        upper.append(p)
-    return np.array(lower[:-1] + upper[:-1])
 
 
 class SupportPolygonLimit(mink.Limit):

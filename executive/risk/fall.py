@@ -38,6 +38,14 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.special import owens_t
 
 from executive.planning_timing import Trajectory
+from executive.polygon import (
+    check_polygon,
+    clip_polygon,
+    convex_hull,
+    halfplanes,
+    polygon_area,
+    signed_margin,
+)
 from executive.risk.gaussian import McEstimate, normal_cdf, union_bounds
 from executive.risk.report import RiskReport
 from executive.scenario_types import RiskConfig, Uncertainty
@@ -60,124 +68,6 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
-
-_EPS = 1e-12
-
-
-# --- planar geometry ----------------------------------------------------------------------
-
-
-def _cross(o: FloatArray, a: FloatArray, b: FloatArray) -> float:
-    return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
-
-
-def convex_hull(points: ArrayLike) -> FloatArray:
-    """Convex hull (V, 2) of 2D points, counter-clockwise, no repeated or collinear vertices.
-
-    Andrew's monotone chain: sort by (x, y), build the lower and the upper chain keeping
-    only left turns. Turns with a cross product below 1e-12 x (the points' extent)^2 count as
-    collinear (no slivers). Fewer than 3 distinct non-collinear points give 1 or 2 rows.
-    """
-    pts = np.asarray(points, dtype=float).reshape(-1, 2)
-    if not np.all(np.isfinite(pts)):
-        raise ValueError("convex_hull: points must be finite")
-    pts = np.unique(pts, axis=0)  # sorted lexicographically by (x, y)
-    if len(pts) <= 2:
-        return pts
-    tol = 1e-12 * float(np.max(np.ptp(pts, axis=0))) ** 2
-    lower: list[FloatArray] = []
-    for p in pts:
-        while len(lower) >= 2 and _cross(lower[-2], lower[-1], p) <= tol:
-            lower.pop()
-        lower.append(p)
-    upper: list[FloatArray] = []
-    for p in pts[::-1]:
-        while len(upper) >= 2 and _cross(upper[-2], upper[-1], p) <= tol:
-            upper.pop()
-        upper.append(p)
-    hull = np.array(lower[:-1] + upper[:-1], dtype=float)
-    return hull
-
-
-def polygon_area(polygon: ArrayLike) -> float:
-    """Signed area (shoelace formula); positive for a counter-clockwise polygon."""
-    v = np.asarray(polygon, dtype=float).reshape(-1, 2)
-    if len(v) < 3:
-        return 0.0
-    w = np.roll(v, -1, axis=0)
-    return 0.5 * float(np.sum(v[:, 0] * w[:, 1] - w[:, 0] * v[:, 1]))
-
-
-def _check_polygon(polygon: ArrayLike) -> FloatArray:
-    v = np.asarray(polygon, dtype=float).reshape(-1, 2)
-    if len(v) < 3 or polygon_area(v) <= 0.0:
-        raise ValueError(
-            f"expected a counter-clockwise convex polygon with at least 3 vertices and positive "
-            f"area, got {len(v)} vertices (area {polygon_area(v):.3g})"
-        )
-    return v
-
-
-def halfplanes(polygon: ArrayLike) -> tuple[FloatArray, FloatArray]:
-    """(A, b) with A's rows the edges' unit outward normals: x inside <=> A x <= b.
-
-    Edge i runs from vertex i to vertex i+1 (cyclically) of the counter-clockwise polygon.
-    """
-    v = _check_polygon(polygon)
-    e = np.roll(v, -1, axis=0) - v
-    length = np.hypot(e[:, 0], e[:, 1])
-    if np.any(length <= 0.0):
-        raise ValueError("halfplanes: the polygon has repeated vertices")
-    a = np.column_stack([e[:, 1], -e[:, 0]]) / length[:, None]
-    b = np.einsum("ij,ij->i", a, v)
-    return a, b
-
-
-def signed_margin(polygon: ArrayLike, point: ArrayLike) -> float:
-    """Signed distance of ``point`` to the polygon's boundary, positive inside.
-
-    Inside: min_i (b_i - a_i.x) (for a convex polygon that is the distance to the nearest
-    edge). Outside: minus the Euclidean distance to the nearest edge segment (so near a vertex
-    it is the distance to that vertex, not to an edge's line).
-    """
-    v = _check_polygon(polygon)
-    x = np.asarray(point, dtype=float).reshape(-1)[:2]
-    a, b = halfplanes(v)
-    slack = b - a @ x
-    if np.all(slack >= 0.0):
-        return float(np.min(slack))
-    w = np.roll(v, -1, axis=0)
-    e = w - v
-    t = np.clip(np.einsum("ij,ij->i", x - v, e) / np.einsum("ij,ij->i", e, e), 0.0, 1.0)
-    nearest = v + t[:, None] * e
-    gap = nearest - x
-    return -float(np.min(np.hypot(gap[:, 0], gap[:, 1])))
-
-
-def clip_polygon(polygon: ArrayLike, normal: ArrayLike, offset: float) -> FloatArray:
-    """The part of a convex polygon with ``normal . x <= offset`` (Sutherland-Hodgman, one plane).
-
-    Returns the (possibly empty, shape (0, 2)) clipped polygon, counter-clockwise.
-    """
-    v = np.asarray(polygon, dtype=float).reshape(-1, 2)
-    n = np.asarray(normal, dtype=float).reshape(2)
-    if len(v) == 0:
-        return v
-    d = v @ n - offset
-    if np.all(d <= 0.0):
-        return v
-    if np.all(d > 0.0):
-        return np.zeros((0, 2))
-    out: list[FloatArray] = []
-    count = len(v)
-    for i in range(count):
-        j = (i + 1) % count
-        if d[i] <= 0.0:
-            out.append(v[i])
-        if (d[i] <= 0.0) != (d[j] <= 0.0):
-            t = d[i] / (d[i] - d[j])
-            out.append(v[i] + t * (v[j] - v[i]))
-    return convex_hull(np.array(out)) if len(out) >= 3 else np.zeros((0, 2))
 
 
 # --- the seed's uncertainty circle ------------------------------------------------------------
@@ -300,7 +190,7 @@ def probability_outside(
     polar-reduced density along each edge with composite Gauss-Legendre (both ~1e-12).
     A zero covariance gives the indicator of the mean being outside.
     """
-    v = _check_polygon(polygon)
+    v = check_polygon(polygon)
     mu = np.asarray(mean, dtype=float).reshape(-1)[:2]
     c = _covariance(cov)
     z = _whiten(v, mu, c)
@@ -450,7 +340,7 @@ def persistent_bias_probability(
     mus = np.asarray(means, dtype=float).reshape(len(polygons), -1)[:, :2]
     if len(polygons) == 0:
         raise ValueError("persistent_bias_probability: no polygons")
-    safe = _check_polygon(polygons[0]) - mus[0]
+    safe = check_polygon(polygons[0]) - mus[0]
     for poly, mu in zip(polygons[1:], mus[1:], strict=True):
         a, b = halfplanes(poly)
         for ai, bi in zip(a, b - a @ mu, strict=True):
