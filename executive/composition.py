@@ -24,7 +24,7 @@ import py_trees
 from numpy.typing import NDArray
 
 from executive.errors import ExecutiveError
-from executive.planning import HandTarget, Planner, Trajectory
+from executive.planning import HandTarget, Planner, PlanningError, Trajectory
 from executive.scenario_types import ALTERNATIVES, TransferTask
 from executive.world import World
 
@@ -217,6 +217,23 @@ def transfer_steps(
         ]
 
     giver, receiver = alternative.split("_to_")
+    if body.yaw_symmetry % 2:
+        # Each top-down hand's forearm lies along the object's long axis (its jaws close across
+        # the width). Both hands take and leave the object forearm-forward, and at the handover
+        # the two forearms point at each other from its two ends, so the object turns a half turn
+        # in all: only an object unchanged by a half turn about the vertical can be handed over.
+        raise PlanningError(
+            alternative,
+            None,
+            0.0,
+            float(np.pi),
+            0,
+            reason=(
+                f"a top-down handover turns '{obj}' a half turn about the vertical, and its yaw "
+                f"matters (yaw_symmetry {body.yaw_symmetry}); declare yaw_symmetry: 2 for an object "
+                "a half turn leaves unchanged"
+            ),
+        )
     d = cfg.handover_offset
     # The giver holds the object's +x end (giver_end = 1) or its -x end (-1), the receiver the other.
     e = 1.0 if cfg.giver_end > 0 else -1.0
@@ -242,8 +259,7 @@ def transfer_steps(
     n_turn = max(1, cfg.giver_turn_steps)
     # The receiver's wrist turns back the natural way (its closing direction ends nearer its home
     # pose's). With both wrists turning naturally the object ends a half turn from place_yaw: the
-    # same pose for a box (symmetric under a half turn about the vertical) but not for every
-    # object, and a task that names its yaw checks it.
+    # same pose for an object with an even yaw_symmetry (checked above).
     back = float(
         np.remainder(
             closing_near_home(receiver, place_yaw) - closing_near_home(receiver, h_yaw) + np.pi, 2 * np.pi

@@ -552,9 +552,16 @@ class FailureDetector:
     # --- the end-of-task check -----------------------------------------------------------
 
     def check_placed(
-        self, obj: str, target_xy: tuple[float, float], target_yaw: float | None = None
+        self,
+        obj: str,
+        target_xy: tuple[float, float],
+        target_yaw: float | None = None,
+        yaw_symmetry: int = 1,
     ) -> Failure | None:
         """At the end: is ``obj`` resting on the table at ``target_xy`` (and ``target_yaw``, rad)?
+
+        The yaw error counts modulo ``2*pi / yaw_symmetry`` (the object's rotational symmetry
+        about the vertical, ``Body.yaw_symmetry``).
 
         None when it is within ``place_position_tol`` (and ``place_yaw_tol_deg``), upright
         within ``place_tilt_deg``, slower than ``rest_speed`` and touching the table;
@@ -576,7 +583,7 @@ class FailureDetector:
             )
         if target_yaw is not None:
             yaw = math.atan2(float(rot[1, 0]), float(rot[0, 0]))
-            dyaw = math.degrees(abs(math.remainder(yaw - target_yaw, 2 * math.pi)))
+            dyaw = math.degrees(abs(math.remainder(yaw - target_yaw, 2 * math.pi / max(1, yaw_symmetry))))
             if not dyaw <= th.place_yaw_tol_deg:
                 problems.append(f"yaw off by {dyaw:.1f} deg (tolerance {th.place_yaw_tol_deg:.1f} deg)")
         tilt = math.degrees(math.acos(max(-1.0, min(1.0, float(rot[2, 2])))))

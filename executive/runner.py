@@ -89,7 +89,9 @@ def execute_plan(
         # No target yaw in the task means: keep the object's yaw (scenario_types.TransferTask).
         nominal = next(b for b in truth.scenario.scene.objects if b.name == task.object)
         target_yaw = task.to_yaw_rad if task.to_yaw_rad is not None else nominal.orientation_rad[2]
-        placed = robot.detector.check_placed(task.object, (task.to[0], task.to[1]), target_yaw)
+        placed = robot.detector.check_placed(
+            task.object, (task.to[0], task.to[1]), target_yaw, nominal.yaw_symmetry
+        )
         pos = truth.data.xpos[truth.ids.object_bodies[task.object]]
         result.placement_error_m = float(np.hypot(pos[0] - task.to[0], pos[1] - task.to[1]))
         if placed is None:

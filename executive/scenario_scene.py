@@ -22,6 +22,7 @@ TOLERANCE = 1e-3
 
 _BODY_KEYS = ("name", "shape", "size", "position")
 _BODY_OPTIONAL = ("orientation", "friction", "rgba")
+_OBJECT_OPTIONAL = (*_BODY_OPTIONAL, "yaw_symmetry")
 
 
 def read_scene(node: Node) -> SceneConfig:
@@ -85,7 +86,7 @@ def _orientation(node: Node | None) -> tuple[float, float, float]:
 
 def _body(node: Node, table: Table, names: dict[str, str], *, is_object: bool) -> Body:
     if is_object:
-        node.check_keys((*_BODY_KEYS, "mass"), _BODY_OPTIONAL)
+        node.check_keys((*_BODY_KEYS, "mass"), _OBJECT_OPTIONAL)
     else:
         if node.is_mapping() and node.has("mass"):
             node.child("mass", None).fail("obstacles are static and take no mass (objects do)")
@@ -111,6 +112,8 @@ def _body(node: Node, table: Table, names: dict[str, str], *, is_object: bool) -
     friction = node.opt("friction")
     rgba = node.opt("rgba")
     rgba_values = rgba.numbers(4, ge=0.0, le=1.0) if rgba is not None else None
+    symmetry_node = node.opt("yaw_symmetry") if is_object else None
+    symmetry = _yaw_symmetry(symmetry_node, shape, size, rpy) if symmetry_node is not None else 1
     return Body(
         name=name,
         shape=shape,
@@ -120,7 +123,29 @@ def _body(node: Node, table: Table, names: dict[str, str], *, is_object: bool) -
         mass=mass,
         friction=friction.positive() if friction is not None else 1.0,
         rgba=(rgba_values[0], rgba_values[1], rgba_values[2], rgba_values[3]) if rgba_values else None,
+        yaw_symmetry=symmetry,
     )
+
+
+def _yaw_symmetry(node: Node, shape: Shape, size: tuple[float, ...], rpy: tuple[float, float, float]) -> int:
+    """``yaw_symmetry``: a rotation by 2*pi/n about the vertical maps the object onto itself."""
+    value = node.value
+    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+        node.expected("a whole number >= 1 (1: the yaw matters; 2: a half turn leaves it unchanged)")
+    n = int(value)
+    if n == 1:
+        return n
+    if abs(rpy[0]) > 1e-9 or abs(rpy[1]) > 1e-9:
+        node.fail(f"yaw_symmetry {n} needs the object upright (roll = pitch = 0)")
+    if shape == "box":
+        square = abs(size[0] - size[1]) <= 1e-9
+        allowed = (2, 4) if square else (2,)
+        if n not in allowed:
+            node.fail(
+                f"a box with a {size[0]:g} x {size[1]:g} m footprint has yaw symmetry "
+                f"{' or '.join(str(a) for a in (1, *allowed))}, not {n}"
+            )
+    return n
 
 
 def _shape(node: Node) -> Shape:

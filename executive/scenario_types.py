@@ -73,6 +73,10 @@ class Body:
     mass: float | None = None  # kg; None for obstacles (static)
     friction: float = 1.0  # sliding friction coefficient
     rgba: tuple[float, float, float, float] | None = None
+    # Order of the object's rotational symmetry about its vertical axis: a half turn (2) leaves
+    # a plain box where it was; 1 (default) means its yaw matters (a labelled container, a book
+    # whose spine must face one way). Yaw errors count modulo 2*pi / yaw_symmetry.
+    yaw_symmetry: int = 1
 
     def half_height(self) -> float:
         """Half the body's vertical extent when upright (roll = pitch = 0)."""

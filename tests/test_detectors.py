@@ -292,6 +292,13 @@ def test_check_placed_measures_the_distance_and_yaw_to_the_target(world: World) 
     yawed = detector.check_placed("book", (x, y), target_yaw=math.radians(20.0))
     assert yawed is not None and "yaw off by 20.0 deg" in yawed.detail
     assert detector.check_placed("book", (x, y)) is None  # the latched failure does not leak in
+    # A half turn: wrong for an object whose yaw matters, the same pose for a half-turn-symmetric one.
+    turned = detector.check_placed("book", (x, y), target_yaw=math.radians(178.0))
+    assert turned is not None and "yaw off by 178.0 deg" in turned.detail
+    assert detector.check_placed("book", (x, y), target_yaw=math.radians(178.0), yaw_symmetry=2) is None
+    assert "yaw off by 20.0 deg" in str(
+        detector.check_placed("book", (x, y), target_yaw=math.radians(200.0), yaw_symmetry=2)
+    )
     with pytest.raises(DetectorError, match="objects: book"):
         detector.check_placed("cup", (x, y))
 

@@ -181,6 +181,24 @@ CASES = [
         "did you mean 'friction'?",
     ),
     Case(
+        "yaw-symmetry-not-whole",
+        put("scene.objects[0].yaw_symmetry", 2.5),
+        "scene.objects[0].yaw_symmetry",
+        "a whole number >= 1",
+    ),
+    Case(
+        "yaw-symmetry-of-oblong-box",
+        put("scene.objects[0].yaw_symmetry", 4),
+        "scene.objects[0].yaw_symmetry",
+        "footprint has yaw symmetry 1 or 2, not 4",
+    ),
+    Case(
+        "yaw-symmetry-on-obstacle",
+        put("scene.obstacles[0].yaw_symmetry", 2),
+        "scene.obstacles[0].yaw_symmetry",
+        "unknown key 'yaw_symmetry'",
+    ),
+    Case(
         "unknown-risk-key",
         rename("risk.collision.exponent", "exponet"),
         "risk.collision.exponet",
