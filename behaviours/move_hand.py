@@ -40,6 +40,11 @@ class MoveHand(RobotBehaviour):
         self.settle_s = settle_s
         self._t0 = 0.0
 
+    @property
+    def started_at(self) -> float:
+        """Robot time at which the trajectory started playing (its t = 0)."""
+        return self._t0
+
     def initialise(self) -> None:
         self._t0 = self.robot.time
         self.feedback_message = f"following {self.trajectory.name} ({self.trajectory.duration:.2f} s)"

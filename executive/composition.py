@@ -446,9 +446,14 @@ def plan_alternative(
     return AlternativePlan(alternative, task, tuple(steps), trajectories)
 
 
-def build_subtree(plan: AlternativePlan) -> py_trees.composites.Sequence:
-    """The alternative as a py_trees Sequence of task-level behaviours (a handover is its own subtree)."""
+def build_subtree(plan: AlternativePlan, *, guard: bool = False) -> py_trees.composites.Sequence:
+    """The alternative as a py_trees Sequence of task-level behaviours (a handover is its own subtree).
+
+    ``guard``: wrap every motion in a :class:`behaviours.guard.RiskGuard` (live risk checks,
+    active when a monitor is on the blackboard).
+    """
     from behaviours.gripper import Grasp, Release
+    from behaviours.guard import RiskGuard
     from behaviours.handover import handover_subtree
     from behaviours.move_hand import Carry, Home, Lift, MoveHand, Place, Retreat
 
@@ -486,8 +491,17 @@ def build_subtree(plan: AlternativePlan) -> py_trees.composites.Sequence:
         else:
             # After a release the open jaws may still brush the object they let go of.
             touching = (step.side, step.allow_contact[0]) if step.kind in ("retreat", "home") else None
+            mover = movers[step.kind](step.name, plan.trajectories[step.name], touching=touching or None)
             children.append(
-                movers[step.kind](step.name, plan.trajectories[step.name], touching=touching or None)
+                RiskGuard(
+                    mover,
+                    side=step.side,
+                    kind=step.kind,
+                    obj=plan.task.object,
+                    allow_contact=step.allow_contact,
+                )
+                if guard
+                else mover
             )
         i += 1
     return py_trees.composites.Sequence(name=plan.name, memory=True, children=children)

@@ -365,6 +365,11 @@ class FailureDetector:
 
     # --- the per-step check --------------------------------------------------------------
 
+    def acknowledge(self) -> Failure | None:
+        """Clear the latched failure (it has been reported) so a new attempt is watched afresh."""
+        failure, self._failure = self._failure, None
+        return failure
+
     def check(self) -> Failure | None:
         """Look at the current state (call after each ``mj_step``); the first failure is latched."""
         if self._failure is not None:

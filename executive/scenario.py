@@ -25,6 +25,7 @@ from executive.scenario_types import (
     CollisionRiskConfig,
     FallRiskConfig,
     GraspRiskConfig,
+    GuardConfig,
     RiskConfig,
     RobotSpec,
     Scenario,
@@ -244,6 +245,19 @@ def _risk(node: Node) -> RiskConfig:
             "severity": ("severity", _severity),
             "ordering": ("ordering", lambda n: n.choice(ORDERINGS)),
             "threshold": ("threshold", Node.non_negative),
+            "guard": ("guard", _guard),
+        },
+    )
+
+
+def _guard(node: Node) -> GuardConfig:
+    return read_fields(
+        node,
+        GuardConfig,
+        {
+            "min_distance": ("min_distance", Node.non_negative),
+            "lookahead_s": ("lookahead_s", Node.non_negative),
+            "min_com_margin": ("min_com_margin", Node.number),
         },
     )
 

@@ -157,6 +157,15 @@ class Severity:
 
 
 @dataclass(frozen=True)
+class GuardConfig:
+    """Live risk guards (behaviours/guard.py): limits re-checked on every tick while a motion runs."""
+
+    min_distance: float = 0.01  # m: least robot-environment distance, now and over the look-ahead
+    lookahead_s: float = 0.3  # s: how far along the planned trajectory the distance is predicted
+    min_com_margin: float = 0.02  # m: least CoM margin inside the support polygon of the foot contacts
+
+
+@dataclass(frozen=True)
 class RiskConfig:
     """Everything the risk models and the selector take from the scenario."""
 
@@ -168,6 +177,7 @@ class RiskConfig:
     severity: Severity = field(default_factory=Severity)
     ordering: Literal["weighted_sum", "probability", "expected_loss"] = "expected_loss"
     threshold: float = 0.3
+    guard: GuardConfig = field(default_factory=GuardConfig)
 
 
 @dataclass(frozen=True)
