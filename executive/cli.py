@@ -95,14 +95,64 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
+    scenario = _load(args.scenario)
+    if args.alternative is None:
+        return _run_mission(scenario, args)
+    return _run_one(scenario, args)
+
+
+def _run_mission(scenario: Scenario, args: argparse.Namespace) -> int:
+    """The main job: plan every alternative, gate on risk, execute the lowest, re-check live."""
+    import os
+
+    from executive.audit import run_folder
+    from executive.mission import Executive
+    from executive.progress import MissionDisplay
+
+    if args.viewer and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        raise ExecutiveError("--viewer needs a display (DISPLAY is not set); use --video FILE.gif offscreen")
+    folder = Path(args.out) if args.out else run_folder(scenario.name)
+    truth: str | int | None = "exact" if args.exact else args.seed
+    executive = Executive(scenario, approval=args.approve, truth=truth, out=folder, guard=not args.no_guard)
+    display = MissionDisplay(executive, sys.stdout)
+    recorder = viewer = None
+    try:
+        if args.video:
+            from executive.render import VideoRecorder
+
+            assert executive.truth is not None
+            recorder = VideoRecorder(executive.truth, Path(args.video))
+        if args.viewer:
+            import mujoco.viewer
+
+            assert executive.truth is not None
+            viewer = mujoco.viewer.launch_passive(executive.truth.model, executive.truth.data)
+        display.start()
+        while not executive.done:
+            executive.tick()
+            display.update()
+            if recorder is not None:
+                recorder.capture()
+            if viewer is not None:
+                viewer.sync()
+    except KeyboardInterrupt:
+        executive.stop("interrupted by the operator (Ctrl-C): tree halted, robot holding")
+    finally:
+        if not executive.done:  # an unexpected error: still leave the robot holding and the log closed
+            executive.stop("stopped by an error")
+        if viewer is not None:
+            viewer.close()
+    display.finish()
+    if recorder is not None:
+        print(f"video     {recorder.save()}")
+    return EXIT_OK if executive.outcome == "success" else EXIT_FAILED
+
+
+def _run_one(scenario: Scenario, args: argparse.Namespace) -> int:
+    """One named alternative, no selection and no approval (for tests and comparisons)."""
     from executive.runner import run_alternative
 
-    scenario = _load(args.scenario)
     task = scenario.mission[0]
-    if args.alternative is None:
-        raise ExecutiveError(
-            f"name the alternative to execute with --alternative (one of: {', '.join(task.alternatives)})"
-        )
     if args.alternative not in task.alternatives:
         raise ExecutiveError(
             f"{scenario.source}: task 0 has no alternative '{args.alternative}'; "
@@ -179,11 +229,28 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", metavar="DIR", help="write CoM/support-polygon and distance plots to DIR")
     p.set_defaults(func=_cmd_plan)
 
-    p = sub.add_parser("run", help="plan and execute an alternative of the mission in physics")
+    p = sub.add_parser(
+        "run",
+        help="run the mission: plan every alternative, gate on risk, execute the lowest-risk one in physics",
+    )
     p.add_argument("scenario", help=scenario_help)
-    p.add_argument("--alternative", help="which way to do the task: left, right, left_to_right, ...")
+    p.add_argument(
+        "--alternative",
+        help="execute this alternative of task 0 only (left, right, left_to_right, ...): "
+        "no selection, no approval",
+    )
     p.add_argument("--exact", action="store_true", help="the truth equals the estimate (no sampled error)")
     p.add_argument("--seed", type=int, default=None, help="seed of the sampled truth (default: trials.seed)")
+    p.add_argument(
+        "--approve",
+        choices=("prompt", "auto", "deny"),
+        default=None,
+        help="approval above the risk threshold (default: the scenario's; prompt only on a terminal)",
+    )
+    p.add_argument("--out", metavar="DIR", help="run folder (default runs/<timestamp>-<scenario>)")
+    p.add_argument("--viewer", action="store_true", help="open the MuJoCo viewer (needs a display)")
+    p.add_argument("--video", metavar="FILE.gif", help="record an offscreen video of the run")
+    p.add_argument("--no-guard", action="store_true", help="run without the live risk guards")
     p.set_defaults(func=_cmd_run)
     return parser
 

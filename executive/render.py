@@ -11,7 +11,7 @@ from numpy.typing import NDArray
 from executive.errors import ExecutiveError
 from executive.world import World
 
-__all__ = ["overview_camera", "render_png", "render_rgb"]
+__all__ = ["VideoRecorder", "overview_camera", "render_png", "render_rgb"]
 
 
 def overview_camera(world: World) -> mujoco.MjvCamera:
@@ -60,3 +60,50 @@ def render_png(world: World, path: Path, width: int = 960, height: int = 720) ->
     path.parent.mkdir(parents=True, exist_ok=True)
     matplotlib.image.imsave(path, rgb)
     return path
+
+
+class VideoRecorder:
+    """Offscreen frames of a world while it runs, saved as an animated GIF (Pillow).
+
+    ``every`` control periods make one frame; frames play at the rate that keeps real time.
+    """
+
+    def __init__(
+        self, world: World, path: Path, *, width: int = 480, height: int = 360, fps: float = 10.0
+    ) -> None:
+        if path.suffix.lower() != ".gif":
+            raise ExecutiveError(
+                f"--video {path}: only animated GIF (.gif) is written (Pillow, no ffmpeg needed)"
+            )
+        self.world, self.path, self.fps = world, path, fps
+        self.camera = overview_camera(world)
+        try:
+            self.renderer = mujoco.Renderer(world.model, height=height, width=width)
+        except Exception as exc:
+            raise ExecutiveError(
+                f"offscreen rendering failed ({exc}); on a headless machine set MUJOCO_GL=egl (or osmesa)"
+            ) from exc
+        self.frames: list[NDArray[np.uint8]] = []
+        self._next_t = 0.0
+
+    def capture(self) -> None:
+        """Take a frame if 1/fps of simulated time has passed since the last one."""
+        t = float(self.world.data.time)
+        if t + 1e-9 < self._next_t:
+            return
+        self._next_t = t + 1.0 / self.fps
+        self.renderer.update_scene(self.world.data, camera=self.camera)
+        self.frames.append(np.asarray(self.renderer.render(), dtype=np.uint8).copy())
+
+    def save(self) -> Path:
+        from PIL import Image
+
+        self.renderer.close()
+        if not self.frames:
+            raise ExecutiveError(f"--video {self.path}: no frames were captured")
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        images = [Image.fromarray(f) for f in self.frames]
+        images[0].save(
+            self.path, save_all=True, append_images=images[1:], duration=int(1000 / self.fps), loop=0
+        )
+        return self.path

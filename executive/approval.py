@@ -1,0 +1,343 @@
+"""Operator approval when even the lowest-risk alternative is above the threshold.
+
+The executive never blocks inside a tick, so approval is asynchronous:
+
+1. the selector builds an :class:`ApprovalRequest` (the task, every alternative with
+   its risk components, the threshold, the reason) and wraps it in a
+   :class:`PendingApproval` with the scenario's timeout;
+2. it hands it to an :class:`ApprovalChannel` with ``submit()``, which returns at once;
+3. every tick it polls ``pending.decision``: None while waiting (the robot holds);
+   an :class:`ApprovalDecision` (approve an alternative, re-plan, abort) once
+   answered; an abort "by timeout" once the deadline passes unanswered.
+
+Channels: :class:`PolicyChannel` (``auto`` approves the recommended alternative,
+``deny`` aborts), :class:`CallbackChannel` (a host function answers now or later),
+:class:`HostChannel` (requests wait for the host to answer), :class:`TerminalChannel`
+(an interactive prompt in a background thread). :func:`make_channel` picks one
+from a mode name.
+"""
+
+from __future__ import annotations
+
+import getpass
+import threading
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import IO, Any, Literal, Protocol
+
+__all__ = [
+    "AlternativeRisk",
+    "ApprovalChannel",
+    "ApprovalDecision",
+    "ApprovalRequest",
+    "CallbackChannel",
+    "HostChannel",
+    "PendingApproval",
+    "PolicyChannel",
+    "TerminalChannel",
+    "make_channel",
+]
+
+Decision = Literal["approve", "replan", "abort"]
+MODES = ("prompt", "auto", "deny")
+
+
+def _now() -> str:
+    return datetime.now(UTC).isoformat(timespec="milliseconds")
+
+
+@dataclass(frozen=True)
+class AlternativeRisk:
+    """One row of a request: an alternative and its predicted risk."""
+
+    name: str
+    feasible: bool
+    risk: Mapping[str, float] = field(default_factory=dict)
+    value: float | None = None  # the ordering quantity (None when infeasible)
+    reason: str = ""  # why infeasible
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "feasible": self.feasible,
+            "risk": dict(self.risk),
+            "value": self.value,
+            "reason": self.reason,
+        }
+
+
+@dataclass(frozen=True)
+class ApprovalRequest:
+    task: str
+    alternatives: tuple[AlternativeRisk, ...]  # ranked, lowest value first
+    recommended: str | None
+    threshold: float
+    ordering: str
+    reason: str
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "task": self.task,
+            "alternatives": [a.as_dict() for a in self.alternatives],
+            "recommended": self.recommended,
+            "threshold": self.threshold,
+            "ordering": self.ordering,
+            "reason": self.reason,
+        }
+
+    def feasible(self, name: str) -> bool:
+        return any(a.name == name and a.feasible for a in self.alternatives)
+
+
+@dataclass(frozen=True)
+class ApprovalDecision:
+    decision: Decision
+    alternative: str | None  # the approved alternative (approve only)
+    by: str  # policy:auto, policy:deny, timeout, operator:<user>, host:<name>, callback:<name>
+    at: str  # ISO 8601 UTC
+    note: str = ""
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "decision": self.decision,
+            "alternative": self.alternative,
+            "by": self.by,
+            "at": self.at,
+            "note": self.note,
+        }
+
+
+class PendingApproval:
+    """A request waiting for its decision; thread-safe, the first answer wins."""
+
+    def __init__(
+        self, request: ApprovalRequest, timeout_s: float | None, clock: Callable[[], float] = time.monotonic
+    ) -> None:
+        self.request = request
+        self.timeout_s = timeout_s
+        self._clock = clock
+        self._deadline = None if timeout_s is None else clock() + timeout_s
+        self._lock = threading.Lock()
+        self._decision: ApprovalDecision | None = None
+        self.resolved = threading.Event()
+
+    def answer(self, decision: ApprovalDecision) -> bool:
+        """Record ``decision`` unless one was recorded already; True if it was taken."""
+        if decision.decision not in ("approve", "replan", "abort"):
+            raise ValueError(f"decision must be approve, replan or abort, not {decision.decision!r}")
+        if decision.decision == "approve":
+            if decision.alternative is None or not self.request.feasible(decision.alternative):
+                names = [a.name for a in self.request.alternatives if a.feasible]
+                raise ValueError(
+                    f"cannot approve {decision.alternative!r}; feasible: {', '.join(names)}"
+                )
+        with self._lock:
+            if self._decision is not None:
+                return False
+            self._decision = decision
+        self.resolved.set()
+        return True
+
+    @property
+    def decision(self) -> ApprovalDecision | None:
+        """None while waiting; an abort by ``timeout`` once the deadline has passed unanswered."""
+        if self._decision is None and self._deadline is not None and self._clock() >= self._deadline:
+            self.answer(
+                ApprovalDecision(
+                    "abort", None, by="timeout", at=_now(), note=f"no answer in {self.timeout_s:g} s"
+                )
+            )
+        return self._decision
+
+    @property
+    def remaining_s(self) -> float | None:
+        return None if self._deadline is None else max(0.0, self._deadline - self._clock())
+
+    def cancel(self, by: str) -> None:
+        self.answer(ApprovalDecision("abort", None, by=by, at=_now(), note="cancelled"))
+
+
+class ApprovalChannel(Protocol):
+    name: str
+
+    def submit(self, pending: PendingApproval) -> None: ...
+
+
+class PolicyChannel:
+    """Batch policies: ``auto`` approves the recommended alternative, ``deny`` aborts."""
+
+    def __init__(self, mode: str) -> None:
+        if mode not in ("auto", "deny"):
+            raise ValueError(f"policy must be auto or deny, not {mode!r}")
+        self.mode = mode
+        self.name = f"policy:{mode}"
+
+    def submit(self, pending: PendingApproval) -> None:
+        recommended = pending.request.recommended
+        if self.mode == "auto" and recommended is not None:
+            pending.answer(ApprovalDecision("approve", recommended, by=self.name, at=_now()))
+        else:
+            pending.answer(ApprovalDecision("abort", None, by=self.name, at=_now()))
+
+
+class CallbackChannel:
+    """``fn(request)`` answers at once (a decision) or later (None, then ``pending.answer``)."""
+
+    def __init__(
+        self, fn: Callable[[ApprovalRequest], ApprovalDecision | None], name: str = "callback"
+    ) -> None:
+        self.fn = fn
+        self.name = f"callback:{name}"
+        self.submitted: list[PendingApproval] = []
+
+    def submit(self, pending: PendingApproval) -> None:
+        self.submitted.append(pending)
+        decision = self.fn(pending.request)
+        if decision is not None:
+            pending.answer(decision)
+
+
+class HostChannel:
+    """Requests wait in ``pending`` until the host answers them."""
+
+    def __init__(self, name: str = "host") -> None:
+        self.name = f"host:{name}"
+        self._all: list[PendingApproval] = []
+
+    @property
+    def pending(self) -> list[PendingApproval]:
+        return [p for p in self._all if p.decision is None]
+
+    def submit(self, pending: PendingApproval) -> None:
+        self._all.append(pending)
+
+    def approve(
+        self, pending: PendingApproval, alternative: str | None = None, by: str | None = None
+    ) -> None:
+        pending.answer(
+            ApprovalDecision(
+                "approve", alternative or pending.request.recommended, by=by or self.name, at=_now()
+            )
+        )
+
+    def abort(self, pending: PendingApproval, by: str | None = None) -> None:
+        pending.answer(ApprovalDecision("abort", None, by=by or self.name, at=_now()))
+
+
+def request_table(request: ApprovalRequest) -> str:
+    """The request as the operator sees it."""
+    lines = [
+        f"APPROVAL NEEDED for {request.task}",
+        f"  {request.reason}",
+        f"  {'#':>2} {'alternative':<15}{'collision':>10}{'fall':>10}{'grasp':>10}{'P(any)':>10}"
+        f"{'exp. loss':>10}",
+    ]
+    for i, alt in enumerate(request.alternatives, 1):
+        mark = "*" if alt.name == request.recommended else " "
+        if not alt.feasible:
+            lines.append(f"{mark} {i:>2} {alt.name:<15}infeasible: {alt.reason}")
+            continue
+        r = alt.risk
+        lines.append(
+            f"{mark} {i:>2} {alt.name:<15}"
+            + "".join(f"{r.get(k, float('nan')):>10.4f}" for k in ("collision", "fall", "grasp", "combined"))
+            + f"{r.get('expected_loss', float('nan')):>10.4f}"
+        )
+    lines.append(f"  * recommended (lowest {request.ordering}); threshold {request.threshold:g}")
+    return "\n".join(lines)
+
+
+class TerminalChannel:
+    """An interactive prompt on a terminal, answered in a background thread.
+
+    Enter or ``a``: approve the recommended; a row number or a name: approve that one;
+    ``r``: re-plan; ``q``/``abort``: abort; end of input: abort.
+    """
+
+    PROMPT = "approve [Enter/a] | choose [# or name] | re-plan [r] | abort [q] > "
+
+    def __init__(
+        self,
+        input_stream: IO[str] | None = None,
+        output_stream: IO[str] | None = None,
+        operator: str | None = None,
+    ) -> None:
+        import sys
+
+        self.input = input_stream if input_stream is not None else sys.stdin
+        self.output = output_stream if output_stream is not None else sys.stdout
+        try:
+            user = operator or getpass.getuser()
+        except Exception:
+            user = "unknown"
+        self.by = f"operator:{user}"
+        self.name = "prompt"
+        self.threads: list[threading.Thread] = []
+
+    def submit(self, pending: PendingApproval) -> None:
+        thread = threading.Thread(target=self._ask, args=(pending,), name="approval-prompt", daemon=True)
+        self.threads.append(thread)
+        thread.start()
+
+    def _say(self, text: str) -> None:
+        self.output.write(text)
+        self.output.flush()
+
+    def parse(self, request: ApprovalRequest, line: str) -> ApprovalDecision | str:
+        """A decision, or the message to show when the answer is not valid."""
+        answer = line.strip()
+        names = [a.name for a in request.alternatives]
+        if answer.lower() in ("", "a", "approve", "y", "yes"):
+            if request.recommended is None:
+                return "nothing to approve: no alternative is feasible (r to re-plan, q to abort)"
+            return ApprovalDecision("approve", request.recommended, by=self.by, at=_now())
+        if answer.lower() in ("r", "replan", "re-plan"):
+            return ApprovalDecision("replan", None, by=self.by, at=_now())
+        if answer.lower() in ("q", "quit", "abort", "n", "no"):
+            return ApprovalDecision("abort", None, by=self.by, at=_now())
+        chosen = names[int(answer) - 1] if answer.isdigit() and 1 <= int(answer) <= len(names) else answer
+        if chosen in names:
+            if not request.feasible(chosen):
+                return f"{chosen} is infeasible and cannot be approved"
+            return ApprovalDecision("approve", chosen, by=self.by, at=_now(), note="chosen by the operator")
+        return f"not understood: {answer!r}; valid: Enter/a, 1-{len(names)}, {', '.join(names)}, r, q"
+
+    def _ask(self, pending: PendingApproval) -> None:
+        request = pending.request
+        timeout = f" (abort in {pending.timeout_s:g} s without an answer)" if pending.timeout_s else ""
+        self._say("\n" + request_table(request) + timeout + "\n")
+        while pending.decision is None:
+            self._say(self.PROMPT)
+            line = self.input.readline()
+            if pending.decision is not None:  # resolved meanwhile (timeout, halt)
+                break
+            if line == "":
+                pending.answer(ApprovalDecision("abort", None, by=self.by, at=_now(), note="end of input"))
+                break
+            result = self.parse(request, line)
+            if isinstance(result, str):
+                self._say(result + "\n")
+                continue
+            pending.answer(result)
+        decision = pending.decision
+        if decision is not None:
+            alt = f" {decision.alternative}" if decision.alternative else ""
+            self._say(f"{decision.decision}{alt} by {decision.by}\n")
+
+
+def make_channel(mode: str, *, interactive: bool | None = None, fallback: str = "deny") -> ApprovalChannel:
+    """``prompt`` (a terminal prompt only when stdin and stdout are terminals, else ``fallback``),
+    ``auto`` or ``deny``."""
+    import sys
+
+    if mode not in MODES:
+        raise ValueError(f"unknown approval mode {mode!r}; valid: {', '.join(MODES)}")
+    if mode == "prompt":
+        if interactive is None:
+            interactive = sys.stdin.isatty() and sys.stdout.isatty()
+        if interactive:
+            return TerminalChannel()
+        return PolicyChannel(fallback if fallback in ("auto", "deny") else "deny")
+    return PolicyChannel(mode)

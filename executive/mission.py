@@ -1,0 +1,322 @@
+"""The executive as an object a host embeds: ``Executive(scenario, approval=...)``, then ``tick()``.
+
+The tree is a Sequence of one :class:`executive.selector.RiskSelector` per task of the
+mission. Each ``tick()`` ticks the tree once and never blocks (planning runs in a
+worker thread, approvals are answered asynchronously); when the executive owns the
+physics (the default: a truth world sampled from the scenario's uncertainty, or
+equal to the estimate with ``truth="exact"``) it then steps the simulation one
+control period. A host that drives its own robot passes ``robot=`` (an object with
+the :class:`executive.robot_interface.RobotInterface` methods) and steps it itself;
+the MuJoCo estimate is then used for prediction only.
+
+Inspect ``status`` (py_trees status of the mission), ``pending_approval`` (the request
+waiting for an answer, if any), ``log`` (the :class:`executive.audit.AuditLog`) and
+``summary()``. ``stop()`` halts the tree, holds the robot and closes the log.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import mujoco
+import numpy as np
+import py_trees
+
+from behaviours.guard import LIVE_RISK_KEY
+from behaviours.robot_access import NAMESPACE, install
+from executive.approval import ApprovalChannel, PendingApproval, make_channel
+from executive.audit import AuditLog, write_summary
+from executive.detectors import FailureDetector
+from executive.execution import SimulatedRobot
+from executive.live_risk import LiveRiskMonitor
+from executive.scenario_types import Scenario
+from executive.selector import RiskSelector, task_label
+from executive.world import World, build, sample_perturbation
+
+__all__ = ["Executive"]
+
+Status = py_trees.common.Status
+
+
+def _load(scenario: Scenario | str | Path) -> Scenario:
+    if isinstance(scenario, Scenario):
+        return scenario
+    from executive.scenario import load
+
+    return load(str(scenario))
+
+
+class Executive:
+    """Plan, gate and run a scenario's mission, one non-blocking tick at a time.
+
+    Args:
+        scenario: a :class:`Scenario`, a scenario file, or a bundled scenario's name.
+        approval: an approval channel, or a mode ``prompt|auto|deny`` (default: the
+            scenario's ``approval.mode``; ``prompt`` only on a terminal, else ``deny``).
+        robot: the host's robot (see :mod:`executive.robot_interface`); None: the executive
+            simulates the truth world itself and steps it in :meth:`tick`.
+        truth: ``"exact"`` (truth = estimate) or a seed for the sampled truth (default
+            ``trials.seed``); only without ``robot``.
+        out: run folder for ``decisions.jsonl``/``summary.json``/plots; None keeps the log in
+            memory only.
+        control_dt: control period (s) of a tick.
+        guard: live risk guards around every motion.
+        background: plan in a worker thread (False: inside the tick, blocking).
+        pace_waiting: while the robot only holds (planning, awaiting approval), step the
+            bundled physics in real time instead of as fast as possible.
+    """
+
+    def __init__(
+        self,
+        scenario: Scenario | str | Path,
+        *,
+        approval: ApprovalChannel | str | None = None,
+        robot: Any = None,
+        truth: str | int | None = None,
+        out: Path | str | None = None,
+        control_dt: float = 0.02,
+        guard: bool = True,
+        background: bool = True,
+        pace_waiting: bool = True,
+    ) -> None:
+        self.scenario = _load(scenario)
+        sc = self.scenario
+        if isinstance(approval, str) or approval is None:
+            mode = approval or sc.approval.mode
+            fallback = sc.approval.mode if sc.approval.mode != "prompt" else "deny"
+            approval = make_channel(mode, fallback=fallback)
+        self.channel: ApprovalChannel = approval
+        self.estimate: World = build(sc)
+        self.truth: World | None = None
+        if robot is None:
+            if truth == "exact":
+                self.truth, self.truth_label = build(sc), "exact (truth = estimate)"
+            else:
+                seed = sc.trials.seed if truth is None else int(truth)
+                rng = np.random.default_rng(seed)
+                self.truth = build(sc, sample_perturbation(sc, rng), kind="truth")
+                self.truth_label = f"sampled from the scenario's uncertainty, seed {seed}"
+            robot = SimulatedRobot(self.truth, control_dt=control_dt, detector=FailureDetector(self.truth))
+            self.owns_physics = True
+        else:
+            self.truth_label = "the host's robot"
+            self.owns_physics = False
+        self.robot = robot
+        self.folder = Path(out) if out is not None else None
+        self.log = AuditLog(self.folder)
+        self.selectors = [
+            RiskSelector(
+                f"task{i}",
+                task,
+                estimate=self.estimate,
+                channel=self.channel,
+                log=self.log,
+                timeout_s=sc.approval.timeout_s,
+                guard=guard,
+                background=background,
+            )
+            for i, task in enumerate(sc.mission)
+        ]
+        self.root = py_trees.composites.Sequence(name=sc.name, memory=True, children=list(self.selectors))
+        self.tree = py_trees.trees.BehaviourTree(self.root)
+        self.monitor = LiveRiskMonitor(self.estimate, sc.risk.guard) if guard else None
+        self.pace_waiting = pace_waiting
+        self.ticks = 0
+        self.max_tick_s = 0.0
+        self.started_wall = time.perf_counter()
+        self.wall_s = 0.0
+        self.outcome: str | None = None  # success | failed | aborted
+        self._summary: dict[str, Any] | None = None
+        self._install()
+        self.tree.setup()
+        self.log.record(
+            "run",
+            scenario=sc.name,
+            source=str(sc.source),
+            robot=sc.robot.name,
+            truth=self.truth_label,
+            approval=self.channel.name,
+            ordering=sc.risk.ordering,
+            threshold=sc.risk.threshold,
+            tasks=[task_label(t) for t in sc.mission],
+            folder=str(self.folder) if self.folder else None,
+        )
+
+    def _install(self) -> None:
+        install(self.robot)
+        client = py_trees.blackboard.Client(name="executive.mission", namespace=NAMESPACE)
+        client.register_key(LIVE_RISK_KEY, access=py_trees.common.Access.WRITE)
+        client.set(LIVE_RISK_KEY, self.monitor)
+
+    # --- state ----------------------------------------------------------------------------
+
+    @property
+    def status(self) -> Status:
+        return self.root.status
+
+    @property
+    def done(self) -> bool:
+        return self.outcome is not None
+
+    @property
+    def pending_approval(self) -> PendingApproval | None:
+        for selector in self.selectors:
+            pending = selector.pending
+            if selector.phase == "awaiting_approval" and pending is not None and pending.decision is None:
+                return pending
+        return None
+
+    @property
+    def current_task(self) -> RiskSelector | None:
+        return next((s for s in self.selectors if s.status == Status.RUNNING), None)
+
+    def describe(self) -> str:
+        """One line: what the executive is doing now."""
+        task = self.current_task
+        if task is None:
+            return self.outcome or "idle"
+        return f"{task.name} [{task.phase}] {task.feedback_message}"
+
+    # --- running --------------------------------------------------------------------------
+
+    def tick(self) -> Status:
+        """Tick the tree once (never blocks); step the bundled physics one control period."""
+        if self.done:
+            return self.status
+        t0 = time.perf_counter()
+        self.tree.tick()
+        self.max_tick_s = max(self.max_tick_s, time.perf_counter() - t0)
+        self.ticks += 1
+        if self.owns_physics and self.status == Status.RUNNING:
+            self.robot.advance()
+            if self.pace_waiting and self._waiting():
+                # While the robot only holds (planning in the worker thread, or an operator to
+                # answer), simulated time follows the wall clock, as a real robot's would,
+                # and the planner gets the processor instead of a physics loop racing ahead.
+                spare = self.robot.control_dt - (time.perf_counter() - t0)
+                if spare > 0:
+                    time.sleep(spare)
+        if self.status != Status.RUNNING:
+            self._finish("success" if self.status == Status.SUCCESS else self._failed_outcome())
+        return self.status
+
+    def _waiting(self) -> bool:
+        task = self.current_task
+        return task is not None and task.phase in ("planning", "awaiting_approval")
+
+    def _failed_outcome(self) -> str:
+        return "aborted" if any(s.outcome == "aborted" for s in self.selectors) else "failed"
+
+    def run(
+        self, *, time_limit_s: float | None = None, on_tick: Callable[[Executive], None] | None = None
+    ) -> dict[str, Any]:
+        """Tick until the mission ends (or ``time_limit_s`` of robot time); return the summary."""
+        while not self.done:
+            self.tick()
+            if on_tick is not None:
+                on_tick(self)
+            if time_limit_s is not None and self.robot.time > time_limit_s and not self.done:
+                self.stop(f"time limit {time_limit_s:.0f} s reached")
+        return self.summary()
+
+    def stop(self, reason: str) -> None:
+        """Halt the tree, hold the robot, answer nothing more, close the log (outcome aborted)."""
+        if self.done:
+            return
+        self.tree.interrupt()
+        self.robot.hold()
+        self.log.record("stop", reason=reason, time=self.robot.time)
+        self._finish("aborted", reason=reason)
+
+    def close(self) -> None:
+        for selector in self.selectors:
+            selector.shutdown()
+        self.tree.shutdown()
+        self.log.close()
+
+    # --- report ---------------------------------------------------------------------------
+
+    def _finish(self, outcome: str, reason: str = "") -> None:
+        self.outcome = outcome
+        self.wall_s = time.perf_counter() - self.started_wall
+        summary = self.summary()
+        if reason:
+            summary["reason"] = reason
+        self._summary = summary
+        self.log.record("end", outcome=outcome, time=self.robot.time, ticks=self.ticks, wall_s=self.wall_s)
+        if self.folder is not None:
+            self._plots()
+            write_summary(self.folder, summary)
+        self.close()
+
+    def _plots(self) -> None:
+        """The pictures of ``executive plan --plot``, for the alternatives each task last ranked."""
+        from executive.report import plot_alternatives
+        from executive.risk.fall import support_polygon
+
+        assert self.folder is not None
+        world = self.estimate
+        mujoco.mj_forward(world.model, world.data)
+        try:
+            polygon = support_polygon(world, world.data, from_contacts=False)
+        except ValueError:
+            return
+        for i, selector in enumerate(self.selectors):
+            if selector.ranking:
+                plot_alternatives(self.scenario, selector.ranking, polygon, self.folder / f"task{i}")
+
+    def summary(self) -> dict[str, Any]:
+        if self._summary is not None:
+            return self._summary
+        tasks = []
+        for selector in self.selectors:
+            tasks.append(
+                {
+                    "task": task_label(selector.task),
+                    "chosen": selector.chosen,
+                    "risk": selector.chosen_risk["risk"] if selector.chosen_risk else None,
+                    "value": selector.chosen_risk["value"] if selector.chosen_risk else None,
+                    "approval": selector.approval.as_dict() if selector.approval else None,
+                    "outcome": selector.outcome,
+                    "failure": selector.failure,
+                    "tried": list(selector.tried),
+                }
+            )
+        placement = self._placement()
+        return {
+            "scenario": self.scenario.name,
+            "outcome": self.outcome,
+            "truth": self.truth_label,
+            "approval_channel": self.channel.name,
+            "ordering": self.scenario.risk.ordering,
+            "threshold": self.scenario.risk.threshold,
+            "tasks": tasks,
+            "placement": placement,
+            "sim_time_s": self.robot.time,
+            "wall_s": self.wall_s or time.perf_counter() - self.started_wall,
+            "ticks": self.ticks,
+            "max_tick_s": self.max_tick_s,
+            "folder": str(self.folder) if self.folder else None,
+        }
+
+    def _placement(self) -> list[dict[str, Any]]:
+        """Where each task's object is now (in the truth world, when the executive owns it)."""
+        if self.truth is None:
+            return []
+        out = []
+        for task in self.scenario.mission:
+            pos, _ = self.truth.object_pose(task.object)
+            err = float(np.hypot(pos[0] - task.to[0], pos[1] - task.to[1]))
+            out.append({"object": task.object, "position": pos, "error_m": err})
+        return out
+
+    def __enter__(self) -> Executive:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if not self.done:
+            self.stop("the host left the executive's context")
+        self.close()

@@ -1,0 +1,204 @@
+"""The risk-gated executive end to end: `executive run`, the Executive API, the audit log.
+
+Outcomes are read from the run folder the command leaves (decisions.jsonl,
+summary.json) and, in process, from the truth world's MuJoCo data.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+import yaml
+
+from executive.approval import ApprovalDecision, ApprovalRequest, CallbackChannel
+from executive.audit import now_iso
+from executive.mission import Executive
+from executive.registry import scenario_path
+from executive.scenario import load
+
+SCRIPT = Path(sys.executable).parent / "executive"
+CMD = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli"]
+ENV = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+
+
+def _risky_scenario(tmp_path: Path, threshold: float = 0.001) -> Path:
+    """book_transfer with a threshold below every alternative's risk: approval is always needed."""
+    doc = yaml.safe_load(scenario_path("book_transfer").read_text())
+    doc["name"] = "book_transfer_risky"
+    doc["risk"]["threshold"] = threshold
+    doc["robot"] = "humanoid"
+    path = tmp_path / "risky.yaml"
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def _lines(folder: Path) -> list[dict[str, Any]]:
+    return [json.loads(line) for line in (folder / "decisions.jsonl").read_text().splitlines()]
+
+
+def _check_gate(entries: list[dict[str, Any]], threshold: float) -> None:
+    """No alternative above the threshold executes without an earlier approval line naming it."""
+    approved: set[tuple[str, str]] = set()
+    for e in entries:
+        if e["kind"] == "approval" and e["decision"] == "approve":
+            approved.add((e["task"], e["alternative"]))
+        if e["kind"] == "execute" and e["value"] > threshold:
+            assert (e["task"], e["alternative"]) in approved, e
+
+
+@pytest.mark.slow
+def test_run_chooses_the_handover_and_places_the_book(tmp_path: Path) -> None:
+    out = tmp_path / "run"
+    proc = subprocess.run(
+        [*CMD, "run", "book_transfer", "--approve", "auto", "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=ENV,
+    )
+    print(proc.stdout[-3000:], proc.stderr[-2000:])
+    assert proc.returncode == 0, proc.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["scenario"] == "book_transfer" and summary["outcome"] == "success"
+    (task,) = summary["tasks"]
+    assert task["chosen"] == "left_to_right" and task["outcome"] == "success" and task["failure"] is None
+    assert task["approval"] is None  # below the threshold: no approval needed
+    assert set(task["risk"]) >= {"collision", "fall", "grasp", "combined", "expected_loss"}
+    assert summary["placement"][0]["error_m"] < 0.02
+    entries = _lines(out)
+    kinds = [e["kind"] for e in entries]
+    assert kinds[0] == "run" and kinds[-1] == "end"
+    assert kinds.count("plan") == 3 and "selection" in kinds and "execute" in kinds and "placed" in kinds
+    assert [e["seq"] for e in entries] == list(range(len(entries)))
+    _check_gate(entries, summary["threshold"])
+    assert (out / "task0" / "left_to_right_com.png").is_file()
+    assert (out / "task0" / "left_to_right_distance.png").is_file()
+    assert "left_to_right" in proc.stdout and "success" in proc.stdout
+
+
+@pytest.mark.slow
+def test_deny_above_threshold_aborts_without_moving_the_arms(tmp_path: Path) -> None:
+    scenario = load(str(_risky_scenario(tmp_path)))
+    executive = Executive(scenario, approval="deny", truth="exact", out=tmp_path / "run")
+    assert executive.truth is not None
+    data, model = executive.truth.data, executive.truth.model
+    arm = [model.jnt_qposadr[j] for joints in executive.truth.ids.arm_joints.values() for j in joints]
+    start = data.qpos[arm].copy()
+    summary = executive.run()
+    moved = float(np.max(np.abs(data.qpos[arm] - start)))
+    print(f"deny: {summary['outcome']}; arm joints moved at most {np.degrees(moved):.3f} deg")
+    assert summary["outcome"] == "aborted"
+    (task,) = summary["tasks"]
+    assert task["approval"]["decision"] == "abort" and task["approval"]["by"] == "policy:deny"
+    assert task["chosen"] is None
+    assert moved < np.radians(0.5)
+    kinds = [e["kind"] for e in _lines(tmp_path / "run")]
+    assert "approval_request" in kinds and "approval" in kinds and "execute" not in kinds
+
+
+@pytest.mark.slow
+def test_cli_deny_exits_1_and_auto_runs_with_an_approval_record(tmp_path: Path) -> None:
+    risky = _risky_scenario(tmp_path)
+    deny = subprocess.run(
+        [*CMD, "run", str(risky), "--approve", "deny", "--exact", "--out", str(tmp_path / "deny")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=ENV,
+    )
+    assert deny.returncode == 1, deny.stderr
+    assert json.loads((tmp_path / "deny" / "summary.json").read_text())["outcome"] == "aborted"
+
+    auto = subprocess.run(
+        [*CMD, "run", str(risky), "--approve", "auto", "--exact", "--out", str(tmp_path / "auto")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        env=ENV,
+    )
+    print(auto.stdout[-2000:])
+    assert auto.returncode == 0, auto.stderr
+    summary = json.loads((tmp_path / "auto" / "summary.json").read_text())
+    (task,) = summary["tasks"]
+    assert task["approval"]["decision"] == "approve" and task["approval"]["by"] == "policy:auto"
+    assert task["approval"]["alternative"] == task["chosen"] == "left_to_right"
+    entries = _lines(tmp_path / "auto")
+    _check_gate(entries, summary["threshold"])
+    kinds = [e["kind"] for e in entries]
+    assert kinds.index("approval") < kinds.index("execute")
+
+
+@pytest.mark.slow
+def test_a_host_may_approve_another_alternative_and_the_log_records_it(tmp_path: Path) -> None:
+    """A callback approves `left` (not the recommended one): it runs, with the approval on record."""
+    scenario = load(str(_risky_scenario(tmp_path)))
+
+    def pick_left(request: ApprovalRequest) -> ApprovalDecision:
+        assert request.recommended == "left_to_right"
+        assert {a.name for a in request.alternatives} == {"left", "right", "left_to_right"}
+        return ApprovalDecision("approve", "left", by="callback:test", at=now_iso())
+
+    executive = Executive(scenario, approval=CallbackChannel(pick_left), truth="exact", out=tmp_path / "r")
+    summary = executive.run()
+    assert summary["outcome"] == "success"
+    assert summary["tasks"][0]["chosen"] == "left"
+    _check_gate(_lines(tmp_path / "r"), scenario.risk.threshold)
+
+
+def test_the_gate_refuses_to_execute_above_threshold_without_approval(tmp_path: Path) -> None:
+    """The invariant is enforced in the selector itself, not only by the channels."""
+    from executive.errors import ExecutiveError
+
+    scenario = load(str(_risky_scenario(tmp_path)))
+    scenario = dataclasses.replace(
+        scenario, mission=(dataclasses.replace(scenario.mission[0], alternatives=("left",)),)
+    )
+    executive = Executive(scenario, approval="deny", truth="exact", background=False)
+    selector = executive.selectors[0]
+    executive.tick()  # plans (in the tick, background=False), escalates, the deny policy answers
+    assert selector.ranking and selector.ranking[0].name == "left"
+    with pytest.raises(ExecutiveError, match="above the threshold without approval"):
+        selector._start("left")
+    executive.stop("test over")
+
+
+@pytest.mark.slow
+def test_a_killed_run_leaves_only_complete_json_lines(tmp_path: Path) -> None:
+    out = tmp_path / "killed"
+    proc = subprocess.Popen(
+        [*CMD, "run", "book_transfer", "--approve", "auto", "--exact", "--out", str(out)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env=ENV,
+    )
+    log = out / "decisions.jsonl"
+    deadline = time.monotonic() + 300
+    try:
+        while time.monotonic() < deadline:
+            if log.exists() and '"kind": "execute"' in log.read_text():
+                break
+            assert proc.poll() is None, "the run ended before it could be killed"
+            time.sleep(0.05)
+        time.sleep(0.5)  # mid-way through the motion
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=30)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    text = log.read_text()
+    assert text.endswith("\n")
+    entries = [json.loads(line) for line in text.splitlines()]  # every line parses
+    kinds = [e["kind"] for e in entries]
+    print(f"killed after {len(entries)} lines: {kinds}")
+    assert "execute" in kinds and "end" not in kinds
+    assert not (out / "summary.json").exists()
