@@ -248,7 +248,7 @@ class RiskSelector(py_trees.composites.Composite):
                 results = self._future.result()
             except ExecutiveError as exc:
                 return self._finish("failed", {"mode": "planning", "detail": str(exc)})
-            except Exception as exc:  # noqa: BLE001 - a defect in planning must still end in the log
+            except Exception as exc:  # a defect in planning must still end in the log
                 detail = f"planning raised {type(exc).__name__}: {exc} (a defect: please report it)"
                 return self._finish("failed", {"mode": "planning", "detail": detail})
             return self._decide(results)
