@@ -72,7 +72,14 @@ class Grasp(RobotBehaviour):
         t = self.robot.time - self._t0
         if t < self.settle_s:
             return Status.RUNNING
-        n, force = object_contacts(self.robot, self.side, self.obj)
+        # A robot with its own touch sensing answers itself (robot_interface.HostRobot);
+        # otherwise the contacts of its MuJoCo state are read.
+        sense = getattr(self.robot, "hand_contacts", None)
+        n, force = (
+            sense(self.side, self.obj)
+            if callable(sense)
+            else object_contacts(self.robot, self.side, self.obj)
+        )
         if n >= self.min_contacts and force >= self.min_force:
             holding = dict(self.bb.holding)
             holding[self.side] = self.obj

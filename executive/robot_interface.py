@@ -7,7 +7,8 @@ positions, contacts and the detectors), joint targets, the gripper, a safe hold.
 physics. For a host's own robot, :class:`HostRobot` builds it from an even
 smaller protocol the host implements, :class:`JointIO`: read the joint state and
 base pose (and, if the robot perceives them, object poses), send joint targets
-and gripper commands. ``HostRobot.sync()`` copies the measured state into a
+and gripper commands, and report touch (hand links on an object, normal force)
+so a grasp can be verified. ``HostRobot.sync()`` copies the measured state into a
 MuJoCo mirror of the scenario (``mj_forward``: kinematics, contacts, forces) and
 runs the failure detectors on it; the host calls it once per control period,
 before :meth:`executive.mission.Executive.tick`.
@@ -72,6 +73,10 @@ class JointIO(Protocol):
     def send_joint_targets(self, targets: Mapping[str, float]) -> None: ...
 
     def send_gripper(self, side: str, closed: bool) -> None: ...
+
+    def hand_contacts(self, side: str, obj: str) -> tuple[int, float]:
+        """Touch sensing: how many hand links touch ``obj`` and the total normal force (N)."""
+        ...
 
 
 class HostRobot:
@@ -143,6 +148,10 @@ class HostRobot:
 
     def set_gripper(self, side: str, closed: bool) -> None:
         self.io.send_gripper(side, closed)
+
+    def hand_contacts(self, side: str, obj: str) -> tuple[int, float]:
+        """The robot's own touch sensing (a kinematic mirror has no trustworthy contact forces)."""
+        return self.io.hand_contacts(side, obj)
 
     def hold(self) -> None:
         self.set_joint_targets(self.data.qpos.copy())
