@@ -73,6 +73,7 @@ def test_angles_are_converted_to_radians() -> None:
     data = bundled_dict()
     data["scene"]["table"]["yaw"] = 90
     data["scene"]["objects"][0]["orientation"] = [10, -20, 30]
+    del data["scene"]["objects"][0]["yaw_symmetry"]  # a tilted box has no symmetry about the vertical
     data["scene"]["obstacles"][0]["orientation"] = 45
     data["uncertainty"]["object_yaw"] = 6
     data["risk"]["grasp"] = {"angle_scale": 5, "angle_max": 40}
