@@ -20,6 +20,9 @@ from a mode name.
 from __future__ import annotations
 
 import getpass
+import os
+import select
+import sys
 import threading
 import time
 from collections.abc import Callable, Mapping
@@ -130,9 +133,7 @@ class PendingApproval:
         if decision.decision == "approve":
             if decision.alternative is None or not self.request.feasible(decision.alternative):
                 names = [a.name for a in self.request.alternatives if a.feasible]
-                raise ValueError(
-                    f"cannot approve {decision.alternative!r}; feasible: {', '.join(names)}"
-                )
+                raise ValueError(f"cannot approve {decision.alternative!r}; feasible: {', '.join(names)}")
         with self._lock:
             if self._decision is not None:
                 return False
@@ -254,9 +255,15 @@ class TerminalChannel:
 
     Enter or ``a``: approve the recommended; a row number or a name: approve that one;
     ``r``: re-plan; ``q``/``abort``: abort; end of input: abort.
+
+    On a terminal the thread waits for input with ``select`` in short slices, so once the
+    request is resolved some other way (timeout, halt, another channel) it stops at once
+    without swallowing the operator's next line. Prompts of one channel are shown one at a
+    time. Streams without a file descriptor (tests) are read with a plain ``readline``.
     """
 
     PROMPT = "approve [Enter/a] | choose [# or name] | re-plan [r] | abort [q] > "
+    POLL_S = 0.05
 
     def __init__(
         self,
@@ -264,20 +271,20 @@ class TerminalChannel:
         output_stream: IO[str] | None = None,
         operator: str | None = None,
     ) -> None:
-        import sys
-
         self.input = input_stream if input_stream is not None else sys.stdin
         self.output = output_stream if output_stream is not None else sys.stdout
-        try:
-            user = operator or getpass.getuser()
-        except Exception:
-            user = "unknown"
-        self.by = f"operator:{user}"
+        if operator is None:
+            try:
+                operator = getpass.getuser()
+            except Exception:  # no user name in the environment or the password database
+                operator = "unknown"
+        self.by = f"operator:{operator}"
         self.name = "prompt"
         self.threads: list[threading.Thread] = []
+        self._one_at_a_time = threading.Lock()
 
     def submit(self, pending: PendingApproval) -> None:
-        thread = threading.Thread(target=self._ask, args=(pending,), name="approval-prompt", daemon=True)
+        thread = threading.Thread(target=self._run, args=(pending,), name="approval-prompt", daemon=True)
         self.threads.append(thread)
         thread.start()
 
@@ -297,19 +304,54 @@ class TerminalChannel:
             return ApprovalDecision("replan", None, by=self.by, at=_now())
         if answer.lower() in ("q", "quit", "abort", "n", "no"):
             return ApprovalDecision("abort", None, by=self.by, at=_now())
-        chosen = names[int(answer) - 1] if answer.isdigit() and 1 <= int(answer) <= len(names) else answer
+        row = answer.isascii() and answer.isdigit() and 1 <= int(answer) <= len(names)
+        chosen = names[int(answer) - 1] if row else answer
         if chosen in names:
             if not request.feasible(chosen):
                 return f"{chosen} is infeasible and cannot be approved"
             return ApprovalDecision("approve", chosen, by=self.by, at=_now(), note="chosen by the operator")
         return f"not understood: {answer!r}; valid: Enter/a, 1-{len(names)}, {', '.join(names)}, r, q"
 
+    def _readable(self, pending: PendingApproval) -> bool:
+        """Wait until a line can be read (True) or the request is resolved otherwise (False)."""
+        try:
+            fd = self.input.fileno()
+            polled = os.isatty(fd)
+        except (AttributeError, OSError, ValueError):  # no descriptor (StringIO) or closed
+            polled = False
+        if not polled:
+            return pending.decision is None
+        while pending.decision is None:
+            try:
+                ready, _, _ = select.select([fd], [], [], self.POLL_S)
+            except (OSError, ValueError):  # select cannot watch it (e.g. Windows console)
+                return True
+            if ready:
+                return True
+        return False
+
+    def _run(self, pending: PendingApproval) -> None:
+        while not self._one_at_a_time.acquire(timeout=self.POLL_S):
+            if pending.decision is not None:  # resolved while an earlier prompt was showing
+                return
+        try:
+            self._ask(pending)
+        except (OSError, ValueError) as exc:  # the terminal went away (closed, hung up)
+            note = f"terminal error: {exc}"
+            pending.answer(ApprovalDecision("abort", None, by=self.by, at=_now(), note=note))
+        finally:
+            self._one_at_a_time.release()
+
     def _ask(self, pending: PendingApproval) -> None:
         request = pending.request
+        if pending.decision is not None:
+            return
         timeout = f" (abort in {pending.timeout_s:g} s without an answer)" if pending.timeout_s else ""
         self._say("\n" + request_table(request) + timeout + "\n")
         while pending.decision is None:
             self._say(self.PROMPT)
+            if not self._readable(pending):
+                break
             line = self.input.readline()
             if pending.decision is not None:  # resolved meanwhile (timeout, halt)
                 break
@@ -324,20 +366,21 @@ class TerminalChannel:
         decision = pending.decision
         if decision is not None:
             alt = f" {decision.alternative}" if decision.alternative else ""
-            self._say(f"{decision.decision}{alt} by {decision.by}\n")
+            lead = "" if decision.by == self.by else "\n"  # the prompt line is still open
+            self._say(f"{lead}{decision.decision}{alt} by {decision.by}\n")
 
 
 def make_channel(mode: str, *, interactive: bool | None = None, fallback: str = "deny") -> ApprovalChannel:
     """``prompt`` (a terminal prompt only when stdin and stdout are terminals, else ``fallback``),
     ``auto`` or ``deny``."""
-    import sys
-
     if mode not in MODES:
         raise ValueError(f"unknown approval mode {mode!r}; valid: {', '.join(MODES)}")
+    if fallback not in ("auto", "deny"):
+        raise ValueError(f"unknown approval fallback {fallback!r}; valid: auto, deny")
     if mode == "prompt":
         if interactive is None:
             interactive = sys.stdin.isatty() and sys.stdout.isatty()
         if interactive:
             return TerminalChannel()
-        return PolicyChannel(fallback if fallback in ("auto", "deny") else "deny")
+        return PolicyChannel(fallback)
     return PolicyChannel(mode)

@@ -2,9 +2,11 @@
 
 from __future__ import annotations
 
+import io
 import json
 import os
 import pty
+import re
 import select
 import subprocess
 import sys
@@ -13,11 +15,10 @@ from pathlib import Path
 
 import pytest
 import yaml
+from approval_driver import REQUEST  # tests/ is on sys.path (pytest's default prepend import mode)
 
 from executive.approval import (
-    AlternativeRisk,
     ApprovalDecision,
-    ApprovalRequest,
     CallbackChannel,
     HostChannel,
     PendingApproval,
@@ -28,20 +29,8 @@ from executive.approval import (
 from executive.audit import now_iso
 from executive.registry import scenario_path
 
-REQUEST = ApprovalRequest(
-    task="task0: transfer book to (0.52, -0.26)",
-    alternatives=(
-        AlternativeRisk(
-            "left_to_right", True, {"collision": 0.0, "combined": 0.0031, "expected_loss": 0.41}, 0.41
-        ),
-        AlternativeRisk("left", True, {"collision": 0.0248, "combined": 0.0277, "expected_loss": 0.52}, 0.52),
-        AlternativeRisk("right", False, {}, None, reason="right hand cannot reach"),
-    ),
-    recommended="left_to_right",
-    threshold=0.3,
-    ordering="expected_loss",
-    reason="lowest expected_loss 0.41 (left_to_right) is above the threshold 0.3",
-)
+DRIVER = Path(__file__).with_name("approval_driver.py")
+PROMPT = TerminalChannel.PROMPT
 
 
 def _decision(kind: str = "approve", alt: str | None = "left", by: str = "test") -> ApprovalDecision:
@@ -54,9 +43,8 @@ def test_policies() -> None:
     PolicyChannel("deny").submit(deny)
     assert auto.decision is not None and auto.decision.decision == "approve"
     assert auto.decision.alternative == "left_to_right" and auto.decision.by == "policy:auto"
-    assert (
-        deny.decision is not None and deny.decision.decision == "abort" and deny.decision.by == "policy:deny"
-    )
+    assert deny.decision is not None and deny.decision.decision == "abort"
+    assert deny.decision.by == "policy:deny"
     with pytest.raises(ValueError, match="auto or deny"):
         PolicyChannel("maybe")
 
@@ -66,21 +54,49 @@ def test_callback_now_or_later_and_the_first_answer_wins() -> None:
     CallbackChannel(lambda r: _decision(alt="left")).submit(now)
     assert now.decision is not None and now.decision.alternative == "left"
     later = PendingApproval(REQUEST, None)
-    CallbackChannel(lambda r: None).submit(later)
-    assert later.decision is None
-    assert later.answer(_decision("replan", None))
+    channel = CallbackChannel(lambda r: None, name="cell")
+    channel.submit(later)
+    assert later.decision is None and channel.submitted == [later]
+    assert later.answer(_decision("replan", None, by=channel.name))
     assert not later.answer(_decision("abort", None))  # too late: the first answer stands
     assert later.decision is not None and later.decision.decision == "replan"
+    assert later.decision.by == "callback:cell"
 
 
 def test_host_channel_keeps_requests_until_answered() -> None:
     host = HostChannel("cell-controller")
-    pending = PendingApproval(REQUEST, None)
-    host.submit(pending)
-    assert host.pending == [pending]
-    host.approve(pending)
+    first, second, third = (PendingApproval(REQUEST, None) for _ in range(3))
+    for pending in (first, second, third):
+        host.submit(pending)
+    assert host.pending == [first, second, third]
+    host.approve(first)  # the recommended one
+    host.approve(second, alternative="left", by="host:alice")
+    assert host.pending == [third]
+    host.abort(third)
     assert host.pending == []
-    assert pending.decision is not None and pending.decision.by == "host:cell-controller"
+    assert first.decision is not None and first.decision.alternative == "left_to_right"
+    assert first.decision.by == "host:cell-controller"
+    assert second.decision is not None and second.decision.alternative == "left"
+    assert second.decision.by == "host:alice"
+    assert third.decision is not None and third.decision.decision == "abort"
+
+
+def test_request_and_decision_are_json_records() -> None:
+    record = json.loads(json.dumps(REQUEST.as_dict()))
+    assert [a["name"] for a in record["alternatives"]] == ["left_to_right", "left", "right"]
+    assert record["recommended"] == "left_to_right" and record["threshold"] == 0.3
+    assert record["alternatives"][2] == {
+        "name": "right",
+        "feasible": False,
+        "risk": {},
+        "value": None,
+        "reason": "right hand cannot reach",
+    }
+    pending = PendingApproval(REQUEST, None)
+    PolicyChannel("auto").submit(pending)
+    assert pending.decision is not None
+    decision = json.loads(json.dumps(pending.decision.as_dict()))
+    assert decision["decision"] == "approve" and decision["at"].endswith("+00:00")
 
 
 def test_only_a_feasible_alternative_named_in_the_request_can_be_approved() -> None:
@@ -89,6 +105,8 @@ def test_only_a_feasible_alternative_named_in_the_request_can_be_approved() -> N
         pending.answer(_decision(alt="right"))
     with pytest.raises(ValueError):
         pending.answer(_decision(alt="jump"))
+    with pytest.raises(ValueError):
+        pending.answer(_decision(alt=None))
     assert pending.decision is None
 
 
@@ -99,33 +117,51 @@ def test_timeout_resolves_to_abort_and_cancel_too() -> None:
     assert pending.decision is None and pending.remaining_s == pytest.approx(0.1)
     clock[0] = 160.0
     assert pending.decision is not None and pending.decision.decision == "abort"
+    assert pending.decision.by == "timeout" and pending.decision.alternative is None
+    assert not pending.answer(_decision(alt="left"))  # too late: the timeout stands
     assert pending.decision.by == "timeout"
     other = PendingApproval(REQUEST, None)
     other.cancel(by="halt")
-    assert other.decision is not None and other.decision.by == "halt"
+    assert other.decision is not None and other.decision.decision == "abort" and other.decision.by == "halt"
+    answered = PendingApproval(REQUEST, None)
+    answered.answer(_decision(alt="left"))
+    answered.cancel(by="halt")  # a cancel after the answer changes nothing
+    assert answered.decision is not None and answered.decision.decision == "approve"
 
 
 def test_make_channel() -> None:
     assert make_channel("prompt", interactive=False, fallback="auto").name == "policy:auto"
+    assert make_channel("prompt", interactive=False).name == "policy:deny"
     assert isinstance(make_channel("prompt", interactive=True), TerminalChannel)
     assert make_channel("deny").name == "policy:deny"
+    assert make_channel("auto").name == "policy:auto"
     with pytest.raises(ValueError, match="prompt, auto, deny"):
         make_channel("ask")
+    with pytest.raises(ValueError, match="auto, deny"):
+        make_channel("prompt", interactive=False, fallback="prompt")
+
+
+def _on_streams(text: str, timeout_s: float | None = None) -> tuple[PendingApproval, str]:
+    """The prompt on in-memory streams (no terminal): typed ``text``, then end of input."""
+    out = io.StringIO()
+    channel = TerminalChannel(io.StringIO(text), out, operator="tester")
+    pending = PendingApproval(REQUEST, timeout_s)
+    channel.submit(pending)
+    for thread in channel.threads:
+        thread.join(timeout=10)
+    return pending, out.getvalue()
+
+
+def test_prompt_on_plain_streams_and_end_of_input_aborts() -> None:
+    pending, out = _on_streams("what\n2\n")
+    assert "not understood: 'what'" in out
+    assert pending.decision is not None and pending.decision.alternative == "left"
+    pending, out = _on_streams("")
+    assert pending.decision is not None and pending.decision.decision == "abort"
+    assert pending.decision.by == "operator:tester" and pending.decision.note == "end of input"
 
 
 # --- the terminal prompt, typed into through a pseudo-terminal -----------------------------------
-
-DRIVER = f"""
-import json, sys, time
-sys.path.insert(0, {str(Path(__file__).parent)!r})
-from test_approval import REQUEST
-from executive.approval import PendingApproval, TerminalChannel
-pending = PendingApproval(REQUEST, float(sys.argv[1]) if len(sys.argv) > 1 else None)
-TerminalChannel(operator="tester").submit(pending)
-while pending.decision is None:
-    time.sleep(0.01)
-print("DECISION " + json.dumps(pending.decision.as_dict()), flush=True)
-"""
 
 
 class Terminal:
@@ -137,9 +173,10 @@ class Terminal:
         os.close(slave)
         self.screen = ""
 
-    def expect(self, text: str, timeout: float = 120.0) -> str:
+    def expect(self, text: str, timeout: float = 120.0, count: int = 1) -> str:
+        """Read until ``text`` has appeared ``count`` times in all; the whole screen so far."""
         deadline = time.monotonic() + timeout
-        while text not in self.screen:
+        while self.screen.count(text) < count:
             left = deadline - time.monotonic()
             assert left > 0, f"{text!r} never appeared; screen:\n{self.screen[-3000:]}"
             ready, _, _ = select.select([self.master], [], [], min(left, 0.5))
@@ -149,72 +186,129 @@ class Terminal:
                 except OSError:  # the child closed the terminal
                     chunk = b""
                 if not chunk:
-                    assert text in self.screen, f"{text!r} never appeared; screen:\n{self.screen[-3000:]}"
+                    assert self.screen.count(text) >= count, (
+                        f"{text!r} never appeared; screen:\n{self.screen[-3000:]}"
+                    )
                 self.screen += chunk.decode(errors="replace")
         return self.screen
 
-    def type(self, line: str) -> None:
-        os.write(self.master, (line + "\n").encode())
+    def type(self, line: str, end: str = "\n") -> None:
+        os.write(self.master, (line + end).encode())
 
-    def close(self) -> int:
+    def close(self, timeout: float = 120.0) -> int:
+        """Wait for the child to exit (killed after ``timeout``), read the rest of the screen."""
         try:
-            code = self.proc.wait(timeout=120)
+            code = self.proc.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            code = self.proc.wait()
+        try:
+            while select.select([self.master], [], [], 0.5)[0]:
+                chunk = os.read(self.master, 65536)
+                if not chunk:
+                    break
+                self.screen += chunk.decode(errors="replace")
+        except OSError:  # EIO: every slave end is closed and the screen is read
+            pass
         finally:
-            if self.proc.poll() is None:
-                self.proc.kill()
             os.close(self.master)
         return code
 
 
-def _drive(answers: list[str], timeout: str | None = None) -> tuple[dict[str, object], str]:
-    term = Terminal([sys.executable, "-c", DRIVER, *([timeout] if timeout else [])])
+def _decisions(screen: str) -> list[dict[str, object]]:
+    """The driver's ``DECISION {json}`` lines (the driver's main thread may print one right
+    after a prompt the channel's thread is about to close, so not only at a line start)."""
+    return [json.loads(found) for found in re.findall(r"DECISION (\{.*?\})\r?$", screen, re.MULTILINE)]
+
+
+def _drive(answers: list[str], *args: str) -> tuple[dict[str, object], str]:
+    """Start the driver on a pseudo-terminal, wait for the prompt, type each answer after
+    the (next) prompt appears, and read the decision the driver prints."""
+    term = Terminal([sys.executable, str(DRIVER), *args])
     try:
-        term.expect("abort [q] > ", timeout=30)
-        for answer in answers:
-            mark = len(term.screen)
+        term.expect(PROMPT, timeout=30)
+        for i, answer in enumerate(answers):
+            if i:  # a re-ask: the previous answer was refused
+                term.expect(PROMPT, timeout=10, count=i + 1)
             term.type(answer)
-            term.expect("\n", timeout=10)
-            del mark
-        screen = term.expect("DECISION ", timeout=30)
-        screen = term.expect("}", timeout=10)
+        term.expect("DECISION ", timeout=30)
     finally:
-        term.close()
-    line = screen[screen.index("DECISION ") :].splitlines()[0]
-    return json.loads(line.removeprefix("DECISION ")), screen
+        code = term.close(timeout=10)  # the driver exits after printing; close reads the rest
+    assert code == 0, term.screen
+    return _decisions(term.screen)[0], term.screen
 
 
 def test_prompt_shows_every_alternative_and_enter_approves_the_recommended() -> None:
     decision, screen = _drive([""])
-    assert "APPROVAL NEEDED" in screen and "above the threshold 0.3" in screen
-    for name in ("left_to_right", "left", "right"):
-        assert name in screen
-    row = next(line for line in screen.splitlines() if " left_to_right " in line and "0.0031" in line)
-    assert row.split()[:3] == ["*", "1", "left_to_right"]  # the recommended row is marked
-    assert "infeasible: right hand cannot reach" in screen
+    assert "APPROVAL NEEDED for task0: transfer book to (0.52, -0.26)" in screen
+    assert "above the threshold 0.3" in screen and "threshold 0.3" in screen
+    rows = {m[2]: m for m in (re.match(r"([* ]) +(\d) (\S+) +(.*)", ln) for ln in screen.splitlines()) if m}
+    assert {number: row[3] for number, row in rows.items()} == {
+        "1": "left_to_right",
+        "2": "left",
+        "3": "right",
+    }
+    assert [row[1] for row in rows.values()] == ["*", " ", " "]  # only the recommended row is marked
+    assert rows["2"][4].split() == ["0.0248", "0.0015", "0.0014", "0.0277", "0.5200"]
+    assert rows["3"][4] == "infeasible: right hand cannot reach"
     assert decision["decision"] == "approve" and decision["alternative"] == "left_to_right"
     assert decision["by"] == "operator:tester"
+    assert str(decision["at"]).endswith("+00:00")
 
 
 def test_prompt_reasks_after_nonsense_and_takes_a_name() -> None:
     decision, screen = _drive(["maybe later", "left"])
-    assert "not understood: 'maybe later'" in screen
+    assert "not understood: 'maybe later'; valid:" in screen
+    assert screen.count(PROMPT) == 2
     assert decision["decision"] == "approve" and decision["alternative"] == "left"
+    assert decision["by"] == "operator:tester"
 
 
 def test_prompt_refuses_an_infeasible_choice_then_takes_a_row_number() -> None:
-    decision, screen = _drive(["3", "2"])
+    decision, screen = _drive(["right", "2"])
     assert "right is infeasible and cannot be approved" in screen
-    assert decision["alternative"] == "left"
+    assert decision["decision"] == "approve" and decision["alternative"] == "left"
 
 
-def test_prompt_replan_and_abort() -> None:
-    assert _drive(["r"])[0]["decision"] == "replan"
-    assert _drive(["q"])[0]["decision"] == "abort"
+def test_prompt_replan() -> None:
+    decision, _ = _drive(["r"])
+    assert decision["decision"] == "replan" and decision["alternative"] is None
+    assert decision["by"] == "operator:tester"
+
+
+def test_prompt_abort() -> None:
+    decision, _ = _drive(["q"])
+    assert decision["decision"] == "abort" and decision["by"] == "operator:tester"
+
+
+def test_prompt_end_of_input_aborts() -> None:
+    decision, _ = _drive(["\x04"])  # Ctrl-D at the start of a line
+    assert decision["decision"] == "abort" and decision["note"] == "end of input"
 
 
 def test_prompt_times_out_to_abort_when_nobody_types() -> None:
-    decision, _ = _drive([], timeout="0.5")
+    start = time.monotonic()
+    decision, screen = _drive([], "--timeout", "0.5")
     assert decision["decision"] == "abort" and decision["by"] == "timeout"
+    assert "abort in 0.5 s without an answer" in screen
+    assert time.monotonic() - start < 10
+
+
+def test_a_timed_out_prompt_stops_and_leaves_the_next_line_to_the_next_prompt() -> None:
+    term = Terminal([sys.executable, str(DRIVER), "--timeout", "0.5", "--twice"])
+    try:
+        term.expect(PROMPT, timeout=30)
+        term.expect("abort by timeout", timeout=10)  # the first prompt gives up by itself
+        term.expect(PROMPT, timeout=10, count=2)  # the second request's prompt
+        term.type("2")
+        term.expect("DECISION ", timeout=10, count=2)
+    finally:
+        code = term.close(timeout=10)
+    assert code == 0, term.screen
+    first, second = _decisions(term.screen)
+    assert first["decision"] == "abort" and first["by"] == "timeout"
+    assert second["decision"] == "approve" and second["alternative"] == "left"
+    assert second["by"] == "operator:tester"
 
 
 @pytest.mark.slow
