@@ -23,10 +23,17 @@ import py_trees
 from behaviours.move_hand import MoveHand
 from behaviours.robot_access import NAMESPACE
 
-__all__ = ["LIVE_RISK_KEY", "RiskGuard"]
+__all__ = ["LIVE_RISK_KEY", "RiskGuard", "install_monitor"]
 
 Status = py_trees.common.Status
 LIVE_RISK_KEY = "live_risk"
+
+
+def install_monitor(monitor: Any) -> None:
+    """Put the live risk monitor (or None: guards off) on the blackboard before ticking a tree."""
+    client = py_trees.blackboard.Client(name="executive.guards", namespace=NAMESPACE)
+    client.register_key(LIVE_RISK_KEY, access=py_trees.common.Access.WRITE)
+    client.set(LIVE_RISK_KEY, monitor)
 
 
 class RiskGuard(py_trees.decorators.Decorator):
@@ -70,11 +77,8 @@ class RiskGuard(py_trees.decorators.Decorator):
         self.tripped = None
         monitor = self._monitor()
         if monitor is not None:
-            from executive.live_risk import step_allowances
-
-            traj = self.motion.trajectory
-            self._allow = step_allowances(
-                monitor.collision, self.side, self.kind, self.obj, self.allow_contact, traj.carried
+            self._allow = monitor.collision.step_allow(
+                self.side, self.kind, self.obj, self.allow_contact, self.motion.trajectory.carried
             )
 
     def update(self) -> Status:

@@ -84,13 +84,8 @@ def _collision(model: CollisionModel, plan: AlternativePlan) -> RiskReport:
         traj = plan.trajectories.get(step.name)
         if traj is None:
             continue
-        allow: set[tuple[str, str]] = set()
-        if obj in step.allow_contact or traj.carried is not None:
-            for side, held in [(step.side, obj), *([traj.carried] if traj.carried else [])]:
-                allow |= model.hand_allow(side, held)
-        if step.kind in ("lift", "place"):
-            allow |= model.support_allow(obj)
-        profile = model.profile(traj, allow=frozenset(allow))
+        allow = model.step_allow(step.side, step.kind, obj, step.allow_contact, traj.carried)
+        profile = model.profile(traj, allow=allow)
         times.append(profile.times + offset)
         knots.extend(profile.knots)
         offset += traj.duration

@@ -30,27 +30,9 @@ from executive.risk.fall import support_polygon
 from executive.scenario_types import GuardConfig
 from executive.world import World
 
-__all__ = ["GuardVerdict", "LiveRiskMonitor", "step_allowances"]
+__all__ = ["GuardVerdict", "LiveRiskMonitor"]
 
 FloatArray = NDArray[np.float64]
-
-
-def step_allowances(
-    model: CollisionModel,
-    side: str,
-    kind: str,
-    obj: str,
-    allow_contact: tuple[str, ...],
-    carried: tuple[str, str] | None,
-) -> frozenset[tuple[str, str]]:
-    """Geom pairs a motion step may bring into contact (as :mod:`executive.assessment` profiles it)."""
-    allow: set[tuple[str, str]] = set()
-    if obj in allow_contact or carried is not None:
-        for hand, held in [(side, obj), *([carried] if carried else [])]:
-            allow |= model.hand_allow(hand, held)
-    if kind in ("lift", "place"):
-        allow |= model.support_allow(obj)
-    return frozenset(allow)
 
 
 @dataclass(frozen=True)

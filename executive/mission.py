@@ -25,8 +25,8 @@ import mujoco
 import numpy as np
 import py_trees
 
-from behaviours.guard import LIVE_RISK_KEY
-from behaviours.robot_access import NAMESPACE, install
+from behaviours.guard import install_monitor
+from behaviours.robot_access import install
 from executive.approval import ApprovalChannel, PendingApproval, make_channel
 from executive.audit import AuditLog, write_summary
 from executive.detectors import FailureDetector
@@ -147,9 +147,7 @@ class Executive:
 
     def _install(self) -> None:
         install(self.robot)
-        client = py_trees.blackboard.Client(name="executive.mission", namespace=NAMESPACE)
-        client.register_key(LIVE_RISK_KEY, access=py_trees.common.Access.WRITE)
-        client.set(LIVE_RISK_KEY, self.monitor)
+        install_monitor(self.monitor)
 
     # --- state ----------------------------------------------------------------------------
 

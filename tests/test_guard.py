@@ -12,8 +12,8 @@ import numpy as np
 import py_trees
 import pytest
 
-from behaviours.guard import LIVE_RISK_KEY, RiskGuard
-from behaviours.robot_access import NAMESPACE, install
+from behaviours.guard import RiskGuard, install_monitor
+from behaviours.robot_access import install
 from executive.composition import AlternativePlan, build_subtree, plan_alternative
 from executive.detectors import FailureDetector
 from executive.execution import SimulatedRobot
@@ -51,19 +51,25 @@ def _stack_contacts(world: World) -> int:
     return n
 
 
-def _run(plan: AlternativePlan, guarded: bool, shift_at: str) -> tuple[Status, SimulatedRobot, str, int]:
-    """Execute ``plan``; when step ``shift_at`` starts, the stack moves in the truth and the estimate."""
+def _guarded_tree(
+    plan: AlternativePlan, guarded: bool
+) -> tuple[World, World, SimulatedRobot, py_trees.behaviour.Behaviour, py_trees.trees.BehaviourTree]:
+    """Truth and estimate of book_transfer, the robot, and the plan's subtree with guards (a monitor
+    on the blackboard when ``guarded``, else none: the guards only pass their child through)."""
     scenario = load("book_transfer")
     truth, estimate = build(scenario), build(scenario)
     robot = SimulatedRobot(truth, detector=FailureDetector(truth))
     install(robot)
-    monitor = LiveRiskMonitor(estimate, scenario.risk.guard) if guarded else None
-    client = py_trees.blackboard.Client(name="test.guard", namespace=NAMESPACE)
-    client.register_key(LIVE_RISK_KEY, access=py_trees.common.Access.WRITE)
-    client.set(LIVE_RISK_KEY, monitor)
+    install_monitor(LiveRiskMonitor(estimate, scenario.risk.guard) if guarded else None)
     root = build_subtree(plan, guard=True)
     tree = py_trees.trees.BehaviourTree(root)
     tree.setup()
+    return truth, estimate, robot, root, tree
+
+
+def _run(plan: AlternativePlan, guarded: bool, shift_at: str) -> tuple[Status, SimulatedRobot, str, int]:
+    """Execute ``plan``; when step ``shift_at`` starts, the stack moves in the truth and the estimate."""
+    truth, estimate, robot, root, tree = _guarded_tree(plan, guarded)
     moved = False
     touches = 0
     message = ""
@@ -107,16 +113,7 @@ def test_obstacle_moved_into_the_path_trips_the_guard_before_any_contact(plan: A
 @pytest.mark.slow
 def test_guard_stays_quiet_on_an_undisturbed_run(plan: AlternativePlan) -> None:
     scenario = load("book_transfer")
-    truth, estimate = build(scenario), build(scenario)
-    robot = SimulatedRobot(truth, detector=FailureDetector(truth))
-    install(robot)
-    monitor = LiveRiskMonitor(estimate, scenario.risk.guard)
-    client = py_trees.blackboard.Client(name="test.guard", namespace=NAMESPACE)
-    client.register_key(LIVE_RISK_KEY, access=py_trees.common.Access.WRITE)
-    client.set(LIVE_RISK_KEY, monitor)
-    root = build_subtree(plan, guard=True)
-    tree = py_trees.trees.BehaviourTree(root)
-    tree.setup()
+    truth, _, robot, root, tree = _guarded_tree(plan, guarded=True)
     least = np.inf
     margins = []
     while truth.data.time < plan.duration + 5.0:

@@ -522,6 +522,24 @@ class CollisionModel:
         obj = self._object_geom(object_name)
         return frozenset((self._geom_names[obj], self._geom_names[g]) for g in self.setup.support_geoms)
 
+    def step_allow(
+        self,
+        side: str,
+        kind: str,
+        obj: str,
+        allow_contact: tuple[str, ...],
+        carried: tuple[str, str] | None,
+    ) -> frozenset[tuple[str, str]]:
+        """Pairs a motion step may bring into contact: the hand the object it grasps (and any hand
+        what it carries), and a carried object its support while lifted or placed."""
+        allow: set[tuple[str, str]] = set()
+        if obj in allow_contact or carried is not None:
+            for hand, held in [(side, obj), *([carried] if carried else [])]:
+                allow |= self.hand_allow(hand, held)
+        if kind in ("lift", "place"):
+            allow |= self.support_allow(obj)
+        return frozenset(allow)
+
     def _object_geom(self, name: str) -> int:
         if name not in self.setup.object_geoms:
             raise CollisionModelError(f"no object '{name}'; objects: {sorted(self.setup.object_geoms)}")
