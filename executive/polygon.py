@@ -18,12 +18,51 @@ def _cross(o: FloatArray, a: FloatArray, b: FloatArray) -> float:
     return float((a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]))
 
 
+def _monotone_chain(pts: FloatArray) -> list[FloatArray]:
+    """Andrew's monotone chain on lexicographically sorted distinct points, exact turn test.
+
+    A point is dropped only on a right turn or an exactly straight one (cross <= 0 in floating
+    point). No tolerance here: with one, a corner whose x differs from its neighbour's by a
+    rounding error (a near-vertical edge sorted out of its geometric order) was dropped as
+    "collinear" although it lies beyond the segment, cutting a corner off the polygon.
+    """
+    lower: list[FloatArray] = []
+    for p in pts:
+        while len(lower) >= 2 and _cross(lower[-2], lower[-1], p) <= 0.0:
+            lower.pop()
+        lower.append(p)
+    upper: list[FloatArray] = []
+    for p in pts[::-1]:
+        while len(upper) >= 2 and _cross(upper[-2], upper[-1], p) <= 0.0:
+            upper.pop()
+        upper.append(p)
+    return lower[:-1] + upper[:-1]
+
+
+def _removable(prev: FloatArray, v: FloatArray, nxt: FloatArray, tol: float) -> bool:
+    """True if dropping vertex ``v`` moves the boundary by at most ``tol``: it nearly repeats
+    ``nxt``, does not turn left, or lies within ``tol`` of the chord prev-nxt and between its ends."""
+    chord = nxt - prev
+    length = float(np.hypot(chord[0], chord[1]))
+    if float(np.hypot(nxt[0] - v[0], nxt[1] - v[1])) <= tol or length <= tol:
+        return True
+    cross = _cross(prev, v, nxt)
+    if cross <= 0.0:
+        return True
+    t = float(np.dot(v - prev, chord)) / (length * length)
+    return cross / length <= tol and 0.0 <= t <= 1.0
+
+
 def convex_hull(points: ArrayLike) -> FloatArray:
     """Convex hull (V, 2) of 2D points, counter-clockwise, no repeated or collinear vertices.
 
-    Andrew's monotone chain: sort by (x, y), build the lower and the upper chain keeping
-    only left turns. Turns with a cross product below 1e-12 x (the points' extent)^2 count as
-    collinear (no slivers). Fewer than 3 distinct non-collinear points give 1 or 2 rows.
+    Andrew's monotone chain (A. M. Andrew, Inf. Process. Lett. 9(5):216-219, 1979): sort by
+    (x, y), build the lower and the upper chain keeping only left turns (exact test). Then
+    vertices that nearly repeat their successor or lie within 1e-12 x (the points' extent) of
+    the chord between their neighbours (and between its ends) are removed one at a time, so the
+    polygon has no slivers or near-zero edges and moves by at most that distance; a true corner
+    is never removed. The first vertex is the lexicographically smallest. Fewer than 3 distinct
+    non-collinear points give 1 or 2 rows.
     """
     pts = np.asarray(points, dtype=float).reshape(-1, 2)
     if not np.all(np.isfinite(pts)):
@@ -31,19 +70,20 @@ def convex_hull(points: ArrayLike) -> FloatArray:
     pts = np.unique(pts, axis=0)  # sorted lexicographically by (x, y)
     if len(pts) <= 2:
         return pts
-    tol = 1e-12 * float(np.max(np.ptp(pts, axis=0))) ** 2
-    lower: list[FloatArray] = []
-    for p in pts:
-        while len(lower) >= 2 and _cross(lower[-2], lower[-1], p) <= tol:
-            lower.pop()
-        lower.append(p)
-    upper: list[FloatArray] = []
-    for p in pts[::-1]:
-        while len(upper) >= 2 and _cross(upper[-2], upper[-1], p) <= tol:
-            upper.pop()
-        upper.append(p)
-    hull = np.array(lower[:-1] + upper[:-1], dtype=float)
-    return hull
+    tol = 1e-12 * float(np.max(np.ptp(pts, axis=0)))
+    hull = _monotone_chain(pts)
+    removed = True
+    while removed and len(hull) > 2:
+        n = len(hull)
+        drop = [i for i in range(n) if _removable(hull[i - 1], hull[i], hull[(i + 1) % n], tol)]
+        removed = bool(drop)
+        if removed:  # one at a time: its neighbours' chords change
+            del hull[drop[0]]
+    out = np.array(hull, dtype=float).reshape(-1, 2)
+    if len(out) == 2 and float(np.hypot(*(out[1] - out[0]))) <= tol:
+        out = out[:1]
+    start = int(np.lexsort((out[:, 1], out[:, 0]))[0])
+    return np.roll(out, -start, axis=0)
 
 
 def polygon_area(polygon: ArrayLike) -> float:

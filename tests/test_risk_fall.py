@@ -310,3 +310,89 @@ def test_convex_hull_examples() -> None:
     np.testing.assert_array_equal(convex_hull(pts), [[0, 0], [1, 0], [1, 1], [0, 1]])
     # Collinear points: the two extremes.
     np.testing.assert_array_equal(convex_hull([(0, 0), (2, 2), (1, 1), (3, 3)]), [[0, 0], [3, 3]])
+
+
+# Two box soles' bottom corners (x, y) at one knot of a planned book_transfer motion: the soles'
+# x coordinates differ by floating-point rounding only (1e-16). The monotone chain with a
+# tolerance on the turn test dropped the right sole's outer-back corner (-0.126.., -0.21) as
+# "collinear", leaving that corner 13 cm outside the support polygon.
+_SOLES_AT_A_KNOT = np.array(
+    [
+        [-0.12624852856246319, 0.060000000000000095],
+        [-0.12624852856246319, 0.21000000000000013],
+        [0.13375147013753694, 0.060000000000000095],
+        [0.13375147013753694, 0.21000000000000013],
+        [-0.1262485285624631, -0.20999999999999994],
+        [-0.1262485285624631, -0.05999999999999997],
+        [0.13375147013753685, -0.20999999999999994],
+        [0.13375147013753685, -0.05999999999999997],
+    ]
+)
+
+
+def _check_hull_against_scipy(points: np.ndarray, hull: np.ndarray) -> None:
+    """Independent reference: qhull (scipy.spatial.ConvexHull) area and vertices, plus containment."""
+    from scipy.spatial import ConvexHull
+
+    ref = ConvexHull(points)
+    # Every hull vertex is an input point, and the polygon is counter-clockwise and convex.
+    assert all(np.any(np.all(points == v, axis=1)) for v in hull)
+    nxt, nxt2 = np.roll(hull, -1, axis=0), np.roll(hull, -2, axis=0)
+    turns = (nxt[:, 0] - hull[:, 0]) * (nxt2[:, 1] - hull[:, 1]) - (nxt[:, 1] - hull[:, 1]) * (
+        nxt2[:, 0] - hull[:, 0]
+    )
+    assert np.all(turns > 0.0)
+    # Same area as qhull's (ConvexHull.volume is the area in 2D).
+    assert polygon_area(hull) == pytest.approx(ref.volume, rel=1e-12, abs=1e-15)
+    # Every input point (so every qhull vertex) is inside or on the boundary (to rounding).
+    a, b = halfplanes(hull)
+    assert float(np.max(points @ a.T - b)) <= 1e-12
+    # Every qhull vertex is within rounding of one of ours (no corner cut off).
+    for v in points[ref.vertices]:
+        assert float(np.min(np.hypot(*(hull - v).T))) <= 1e-12
+
+
+def test_convex_hull_keeps_corners_whose_x_differ_by_rounding() -> None:
+    hull = convex_hull(_SOLES_AT_A_KNOT)
+    # The two soles span x in [-0.12625, 0.13375], y in [-0.21, 0.21]: a rectangle.
+    assert len(hull) == 4
+    assert polygon_area(hull) == pytest.approx((0.13375147013753694 + 0.12624852856246319) * 0.42, rel=1e-12)
+    _check_hull_against_scipy(_SOLES_AT_A_KNOT, hull)
+    # A CoM midway between the soles' front and back edges: its margin is the rectangle's half
+    # length (the front and back edges are the nearest), not the distance to a cut corner's chord.
+    lo, hi = float(np.min(_SOLES_AT_A_KNOT[:, 0])), float(np.max(_SOLES_AT_A_KNOT[:, 0]))
+    assert signed_margin(hull, [(lo + hi) / 2.0, 0.0]) == pytest.approx((hi - lo) / 2.0, abs=1e-12)
+
+
+def test_convex_hull_with_one_ulp_jitters_of_two_soles() -> None:
+    """Each corner's x and y moved by -1, 0 or +1 ulp (random combinations): always the rectangle."""
+    rng = np.random.default_rng(7)
+    base = np.array([[x, y] for x in (-0.126, 0.134) for y in (0.06, 0.21, -0.21, -0.06)])
+    area = 0.26 * 0.42
+    for _ in range(400):
+        steps = rng.integers(-1, 2, size=base.shape)
+        pts = np.where(
+            steps > 0, np.nextafter(base, np.inf), np.where(steps < 0, np.nextafter(base, -np.inf), base)
+        )
+        hull = convex_hull(pts)
+        assert len(hull) == 4, (pts.tolist(), hull.tolist())
+        assert polygon_area(hull) == pytest.approx(area, rel=1e-12)
+        _check_hull_against_scipy(pts, hull)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.floats(-np.pi, np.pi),
+    st.lists(st.integers(-3, 3), min_size=16, max_size=16),
+    st.floats(0.0, 0.4),
+)
+def test_convex_hull_of_rotated_jittered_soles_matches_qhull(yaw: float, ulps: list[int], gap: float) -> None:
+    """Two rotated soles whose coordinates carry a few ulps of rounding noise: same hull as qhull."""
+    corners = np.array([[x, y] for x in (-0.13, 0.13) for y in (0.06, 0.06 + gap, -0.06, -0.06 - gap)])
+    rot = np.array([[np.cos(yaw), -np.sin(yaw)], [np.sin(yaw), np.cos(yaw)]])
+    pts = corners @ rot.T
+    noise = np.array(ulps, dtype=float).reshape(8, 2) * np.spacing(np.abs(pts))
+    pts = pts + noise
+    hull = convex_hull(pts)
+    assert len(hull) == 4  # the outer rectangle of the two soles
+    _check_hull_against_scipy(pts, hull)
