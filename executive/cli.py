@@ -201,6 +201,51 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_campaign(args: argparse.Namespace) -> int:
+    from executive.campaign import run_campaign, table_text
+
+    scenario = _load(args.scenario)
+    alternatives = [a.strip() for a in args.alternatives.split(",")] if args.alternatives else None
+    result = run_campaign(
+        scenario,
+        trials=args.trials,
+        jobs=args.jobs,
+        out=args.out,
+        resume=args.resume,
+        backend=args.backend,
+        seed=args.seed,
+        task_index=args.task,
+        alternatives=alternatives,
+        stream=sys.stdout,
+    )
+    print(table_text(result.summary))
+    rate = result.trials_per_s
+    print(
+        f"trials    {result.new_trials} run in {result.elapsed_s:.1f} s wall "
+        f"({rate:.2f} trials/s on {args.jobs} job(s), {args.backend}); {len(result.records)} in all"
+    )
+    print(f"run folder {result.folder} (trials.jsonl, summary.json, table.md, reliability.png)")
+    if result.interrupted or not result.summary["complete"]:
+        print(
+            f"executive campaign: interrupted; {len(result.records)} trial(s) kept. Complete it with: "
+            f"executive campaign {args.scenario} --trials {result.summary['trials_per_alternative']} "
+            f"--resume --out {result.folder}",
+            file=sys.stderr,
+        )
+        return EXIT_FAILED
+    return EXIT_OK
+
+
+def _positive(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="executive",
@@ -252,6 +297,29 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--video", metavar="FILE.gif", help="record an offscreen video of the run")
     p.add_argument("--no-guard", action="store_true", help="run without the live risk guards")
     p.set_defaults(func=_cmd_run)
+
+    p = sub.add_parser(
+        "campaign",
+        help="Monte Carlo validation: N sampled truths per alternative executed in physics, "
+        "predicted risk vs observed failures",
+    )
+    p.add_argument("scenario", help=scenario_help)
+    p.add_argument(
+        "--trials", type=_positive, default=None, help="trials per alternative (default: trials.count)"
+    )
+    p.add_argument("--jobs", type=_positive, default=1, help="parallel worker processes (default 1)")
+    p.add_argument("--out", metavar="DIR", help="run folder (default runs/<timestamp>-<scenario>-campaign)")
+    p.add_argument("--resume", action="store_true", help="complete the campaign in --out DIR")
+    p.add_argument(
+        "--backend",
+        choices=("local", "ray"),
+        default="local",
+        help="local processes (default) or Ray tasks (pip install .[cluster])",
+    )
+    p.add_argument("--seed", type=int, default=None, help="seed of trial 0 (default: trials.seed)")
+    p.add_argument("--task", type=int, default=0, help="index of the mission's task (default 0)")
+    p.add_argument("--alternatives", help="comma-separated subset of the task's alternatives (default: all)")
+    p.set_defaults(func=_cmd_campaign)
     return parser
 
 

@@ -10,7 +10,8 @@ Pure functions of arrays, each with the reference it follows:
 * :func:`brier`: mean squared error of a probability forecast (Brier 1950);
 * :func:`calibration_bins` and :func:`expected_calibration_error`: equal-width bins of the
   predicted probability, ECE = sum_b n_b / N |mean p_b - mean y_b| (Naeini et al. 2015);
-* :func:`reliability_diagram`: those bins drawn against the diagonal (DeGroot & Fienberg 1983).
+* :func:`reliability_diagram`: observed rate against predicted probability, with the diagonal
+  (DeGroot & Fienberg 1983).
 """
 
 from __future__ import annotations
@@ -29,6 +30,7 @@ __all__ = [
     "calibration_bins",
     "clopper_pearson",
     "expected_calibration_error",
+    "quantile_groups",
     "rank",
     "reliability_diagram",
     "roc_auc",
@@ -150,49 +152,79 @@ def expected_calibration_error(probabilities: ArrayLike, labels: ArrayLike, bins
     return float(sum(b.count / total * abs(b.mean_predicted - b.observed_rate) for b in table if b.count))
 
 
+def quantile_groups(probabilities: ArrayLike, groups: int = 10) -> list[NDArray[np.intp]]:
+    """Indices of ``probabilities`` in at most ``groups`` groups of near-equal size, in
+    increasing order of probability, never splitting equal values (a campaign's predictions
+    repeat: one value per alternative when the estimate is fixed)."""
+    p = np.asarray(probabilities, dtype=float)
+    order = np.argsort(p, kind="mergesort")
+    out: list[NDArray[np.intp]] = []
+    target = max(1, math.ceil(len(p) / groups))
+    start = 0
+    while start < len(p):
+        end = min(len(p), start + target)
+        while end < len(p) and p[order[end]] == p[order[end - 1]]:
+            end += 1  # keep ties together
+        out.append(order[start:end])
+        start = end
+    return out
+
+
 def reliability_diagram(
     curves: Sequence[tuple[str, ArrayLike, ArrayLike]],
     path: Path | str,
     *,
+    groups: int = 10,
     bins: int = 10,
     title: str = "Reliability of the predicted failure probabilities",
 ) -> Path:
-    """One PNG: observed failure rate against mean predicted probability per bin, per curve.
+    """One PNG: observed failure rate against mean predicted probability, per curve.
 
-    ``curves``: (label, predicted probabilities, 0/1 outcomes). Marker areas grow with the
-    bin's count; the diagonal is perfect calibration; each label carries its ECE and Brier.
+    ``curves``: (label, predicted probabilities, 0/1 outcomes). Trials are grouped by
+    predicted probability into near-equal-count groups (:func:`quantile_groups`; equal-width
+    bins put every small probability in the first bin); each point carries its 95%
+    Clopper-Pearson interval; the x axis is logarithmic because failure probabilities of
+    a good plan are small. The diagonal is perfect calibration; each label gives the
+    curve's ECE (``bins`` equal-width bins) and Brier score.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax, hist) = plt.subplots(
-        2, 1, figsize=(6.0, 7.0), gridspec_kw={"height_ratios": [3, 1]}, sharex=True
-    )
-    ax.plot([0, 1], [0, 1], color="0.6", linestyle="--", linewidth=1, label="perfect calibration")
+    floor = 1e-4  # probabilities below are drawn at the axis' left edge
+    fig, ax = plt.subplots(figsize=(6.5, 5.5))
+    ax.plot([floor, 1], [floor, 1], color="0.6", linestyle="--", linewidth=1, label="perfect calibration")
     for label, p, y in curves:
         p_arr, y_arr = np.asarray(p, dtype=float), np.asarray(y, dtype=float)
-        table = [b for b in calibration_bins(p_arr, y_arr, bins) if b.count]
-        if not table:
+        if len(p_arr) == 0:
             continue
-        xs = [b.mean_predicted for b in table]
-        ys = [b.observed_rate for b in table]
-        sizes = [20 + 200 * math.sqrt(b.count / len(p_arr)) for b in table]
+        xs, ys, lows, highs = [], [], [], []
+        for idx in quantile_groups(p_arr, groups):
+            k, n = int(y_arr[idx].sum()), len(idx)
+            low, high = clopper_pearson(k, n)
+            xs.append(max(floor, float(p_arr[idx].mean())))
+            ys.append(k / n)
+            lows.append(k / n - low)
+            highs.append(high - k / n)
         ece = expected_calibration_error(p_arr, y_arr, bins)
-        line = ax.plot(xs, ys, marker="", linewidth=1)[0]
-        ax.scatter(xs, ys, s=sizes, color=line.get_color(), alpha=0.7)
-        line.set_label(f"{label} (ECE {ece:.3f}, Brier {brier(p_arr, y_arr):.3f})")
-        hist.hist(p_arr, bins=bins, range=(0, 1), histtype="step", color=line.get_color())
-    ax.set_xlim(0, 1)
+        ax.errorbar(
+            xs,
+            ys,
+            yerr=[lows, highs],
+            marker="o",
+            capsize=3,
+            linewidth=1,
+            label=f"{label} (ECE {ece:.3f}, Brier {brier(p_arr, y_arr):.3f})",
+        )
+    ax.set_xscale("log")
+    ax.set_xlim(floor * 0.8, 1.0)
     ax.set_ylim(-0.02, 1.02)
-    ax.set_ylabel("observed failure rate")
+    ax.set_xlabel("mean predicted probability (log scale; groups of near-equal count)")
+    ax.set_ylabel("observed failure rate (95% Clopper-Pearson)")
     ax.set_title(title)
     ax.legend(loc="upper left", fontsize=8)
-    ax.grid(alpha=0.3)
-    hist.set_xlabel(f"predicted probability ({bins} equal-width bins)")
-    hist.set_ylabel("trials")
-    hist.set_yscale("symlog")
+    ax.grid(alpha=0.3, which="both")
     fig.tight_layout()
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)

@@ -14,6 +14,7 @@ from executive.stats import (
     calibration_bins,
     clopper_pearson,
     expected_calibration_error,
+    quantile_groups,
     rank,
     reliability_diagram,
     roc_auc,
@@ -127,3 +128,12 @@ def test_reliability_diagram_writes_a_png(tmp_path: Path) -> None:
     out = reliability_diagram(curves, tmp_path / "r.png")
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert out.stat().st_size > 10000
+
+
+def test_quantile_groups_keep_ties_together_and_cover_every_trial() -> None:
+    p = [0.3, 0.01, 0.01, 0.01, 0.2, 0.01, 0.5, 0.3]
+    groups = quantile_groups(p, groups=4)
+    assert sorted(int(i) for g in groups for i in g) == list(range(8))
+    values = [sorted({p[i] for i in g}) for g in groups]
+    assert values[0] == [0.01]  # the four equal values stay in one group
+    assert all(max(a) <= min(b) for a, b in zip(values, values[1:], strict=False))

@@ -1,0 +1,693 @@
+"""Monte Carlo validation campaigns: does the predicted risk predict real failures?
+
+A campaign runs N trials of every alternative of one task (DESIGN.md, "Validation").
+Trial ``i`` of every alternative uses the same truth: a perturbation drawn from the
+scenario's uncertainty with the generator seeded ``trials.seed + i`` (common random
+numbers: the alternatives are compared on the same worlds). A trial
+
+1. takes the alternative's plan and predicted risk report on the *estimate*
+   (planned once per alternative: the estimate is the same in every trial, and
+   planning is deterministic, so planning it again per trial would give the same
+   plan at a hundred times the cost);
+2. builds the truth world of its perturbation (object and obstacle poses, object
+   mass, friction, the robot's CoM offset);
+3. executes the plan in physics with the alternative forced (no selection, no
+   approval, no live guards: the question is what the plan does, not whether a
+   guard would stop it) and records the failure detectors' verdict.
+
+Outcomes: ``success``, or the detector's failure mode ``collision``, ``fall``,
+``drop``, ``unstable``, or ``timeout`` (not finished in the time limit);
+``infeasible`` when the alternative does not plan (no trial is executed) and
+``error`` when the trial's code raised (a defect; counted, never hidden).
+
+Results stream to ``trials.jsonl`` in the run folder, in trial order whatever the
+number of jobs, one line per trial, flushed and fsync'ed as it is written; the
+lines hold no timings, so the same seed gives the same file. ``--resume``
+completes an interrupted campaign (or extends it to more trials). At the end
+``summary.json``, ``table.md`` and ``reliability.png`` are written.
+
+Backends: ``local`` (this process for one job, else a pool of spawned processes)
+and ``ray`` (Ray tasks, ``pip install .[cluster]``; a running cluster is used
+when ``RAY_ADDRESS`` is set, else a local Ray instance with ``jobs`` CPUs).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import pickle
+import time
+import traceback
+from collections.abc import Iterator, Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import IO, Any, Literal
+
+import numpy as np
+
+from executive.errors import ExecutiveError
+from executive.scenario_types import Scenario
+
+__all__ = [
+    "FAILURE_MODES",
+    "PREDICTOR",
+    "CampaignResult",
+    "Prediction",
+    "TrialLog",
+    "predict",
+    "read_trials",
+    "run_campaign",
+    "run_trial",
+    "summarise",
+    "table_markdown",
+    "table_text",
+]
+
+# What the detectors can report, in the order tables show them.
+FAILURE_MODES = ("collision", "fall", "drop", "unstable", "timeout")
+# The predicted probability that forecasts each observed failure mode: the grasp risk is the
+# seed's risk that the object is not held (Long et al. 2018), so it forecasts drops.
+PREDICTOR = {"collision": "collision", "fall": "fall", "drop": "grasp"}
+
+Backend = Literal["local", "ray"]
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """An alternative planned on the estimate: its risk report, or why it does not plan."""
+
+    alternative: str
+    feasible: bool
+    risk: dict[str, float] | None  # CombinedRisk.as_dict(): collision, fall, grasp, combined, ...
+    value: float | None  # the scenario's ordering quantity
+    error: str = ""
+    plan: Any = field(default=None, repr=False)  # AlternativePlan (None when infeasible)
+
+
+def predict(scenario: Scenario, task_index: int, alternative: str) -> Prediction:
+    """Plan ``alternative`` on the estimate and assess its risk (as ``executive plan`` does)."""
+    from executive.assessment import assess_plan
+    from executive.composition import plan_alternative
+    from executive.planning import Planner, PlanningError
+    from executive.risk.collision import CollisionModel
+    from executive.world import build
+
+    world = build(scenario)
+    task = scenario.mission[task_index]
+    try:
+        plan = plan_alternative(Planner(world), world, task, alternative)
+    except PlanningError as exc:
+        return Prediction(alternative, False, None, None, str(exc))
+    model = CollisionModel(world, scenario.risk, uncertainty=scenario.uncertainty)
+    risk = assess_plan(world, plan, model)
+    return Prediction(alternative, True, risk.as_dict(), risk.value(scenario.risk.ordering), "", plan)
+
+
+def trial_seed(base_seed: int, index: int) -> int:
+    """The seed of trial ``index``: ``trials.seed + index`` (the same for every alternative)."""
+    return base_seed + index
+
+
+def run_trial(
+    scenario: Scenario, task_index: int, prediction: Prediction, index: int, seed: int
+) -> dict[str, Any]:
+    """Execute one trial; the record written to ``trials.jsonl`` (JSON-safe, no timings)."""
+    from executive.runner import execute_plan
+    from executive.world import build, sample_perturbation
+
+    perturbation = sample_perturbation(scenario, np.random.default_rng(seed))
+    record: dict[str, Any] = {
+        "trial": index,
+        "alternative": prediction.alternative,
+        "seed": seed,
+        "outcome": "infeasible",
+        "failure": None,
+        "placement_error_m": None,
+        "sim_time_s": 0.0,
+        "predicted": prediction.risk,
+        "truth": _perturbation_json(asdict(perturbation)),
+    }
+    if not prediction.feasible:
+        record["failure"] = {"mode": "infeasible", "detail": prediction.error}
+        return record
+    try:
+        truth = build(scenario, perturbation, kind="truth")
+        result = execute_plan(prediction.plan, truth, scenario.mission[task_index])
+    except Exception as exc:  # a defect in a trial must not end the campaign; it is counted
+        record["outcome"] = "error"
+        last = traceback.extract_tb(exc.__traceback__)[-1]
+        record["failure"] = {
+            "mode": "error",
+            "detail": f"{type(exc).__name__}: {exc} ({Path(last.filename).name}:{last.lineno})",
+        }
+        return record
+    record["sim_time_s"] = round(result.sim_time_s, 6)
+    if result.placement_error_m is not None:
+        record["placement_error_m"] = round(result.placement_error_m, 6)
+    if result.outcome == "success":
+        record["outcome"] = "success"
+    elif result.outcome == "timeout":
+        record["outcome"] = "timeout"
+        record["failure"] = {"mode": "timeout", "detail": result.message}
+    else:
+        failure = result.failure
+        mode = failure.mode if failure is not None else "unstable"
+        record["outcome"] = mode
+        record["failure"] = {
+            "mode": mode,
+            "detail": failure.detail if failure is not None else result.message,
+            "time": round(failure.time, 6) if failure is not None else None,
+            "bodies": list(failure.bodies) if failure is not None else [],
+            "force": round(failure.force, 3) if failure is not None else 0.0,
+        }
+    return record
+
+
+def _perturbation_json(p: dict[str, Any]) -> dict[str, Any]:
+    def r(v: Any) -> Any:
+        if isinstance(v, dict):
+            return {k: r(x) for k, x in v.items()}
+        if isinstance(v, list | tuple):
+            return [r(x) for x in v]
+        if isinstance(v, float):
+            return round(v, 9)
+        return v
+
+    return r(p)
+
+
+# --- the trials file -------------------------------------------------------------------------
+
+
+class TrialLog:
+    """``trials.jsonl``: one trial per line, appended, flushed and fsync'ed line by line."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._file: IO[str] = path.open("a", encoding="utf-8")
+
+    def write(self, record: dict[str, Any]) -> None:
+        self._file.write(json.dumps(record, allow_nan=False, sort_keys=True) + "\n")
+        self._file.flush()
+        os.fsync(self._file.fileno())
+
+    def close(self) -> None:
+        self._file.close()
+
+
+def read_trials(path: Path, *, repair: bool = False) -> list[dict[str, Any]]:
+    """The trials recorded in ``path``.
+
+    A last line cut short (a campaign killed while writing) is dropped, and with
+    ``repair`` cut off the file so appending continues cleanly; a bad line before
+    the last is an error naming it.
+    """
+    if not path.is_file():
+        return []
+    raw = path.read_bytes()
+    *complete, tail = raw.split(b"\n")  # tail: what follows the last newline (a cut-short line)
+    records: list[dict[str, Any]] = []
+    for number, line in enumerate(complete, start=1):
+        if not line.strip():
+            continue
+        try:
+            record = json.loads(line)
+        except ValueError as exc:
+            raise ExecutiveError(f"{path}:{number}: not valid JSON ({exc})") from None
+        if not isinstance(record, dict) or "trial" not in record or "alternative" not in record:
+            raise ExecutiveError(f"{path}:{number}: not a trial record (no 'trial' and 'alternative')")
+        records.append(record)
+    good = len(raw) - len(tail)
+    if repair and good < len(raw):
+        with path.open("r+b") as f:
+            f.truncate(good)
+    return records
+
+
+# --- backends ----------------------------------------------------------------------------------
+
+_WORKER: dict[str, Any] = {}
+
+
+def _init_worker(scenario: Scenario, task_index: int) -> None:
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    _WORKER.clear()
+    _WORKER.update(scenario=scenario, task_index=task_index, predictions={}, path=None)
+
+
+def _predict_in_worker(alternative: str) -> Prediction:
+    return predict(_WORKER["scenario"], _WORKER["task_index"], alternative)
+
+
+def _trial_in_worker(spec: tuple[str, int, str, int]) -> dict[str, Any]:
+    path, index, alternative, seed = spec
+    if _WORKER["path"] != path:  # the predictions (with their plans) once per worker
+        with open(path, "rb") as f:
+            _WORKER["predictions"] = pickle.load(f)
+        _WORKER["path"] = path
+    prediction = _WORKER["predictions"][alternative]
+    return run_trial(_WORKER["scenario"], _WORKER["task_index"], prediction, index, seed)
+
+
+def _ray_predict(scenario: Scenario, task_index: int, alternative: str) -> Prediction:
+    return predict(scenario, task_index, alternative)
+
+
+def _ray_trial(
+    scenario: Scenario,
+    task_index: int,
+    predictions: dict[str, Prediction],
+    index: int,
+    alternative: str,
+    seed: int,
+) -> dict[str, Any]:
+    return run_trial(scenario, task_index, predictions[alternative], index, seed)
+
+
+class _Runner:
+    """Runs predictions and trials on a backend; trials come back in the order asked."""
+
+    def __init__(
+        self, scenario: Scenario, task_index: int, jobs: int, backend: Backend, folder: Path
+    ) -> None:
+        self.scenario, self.task_index, self.jobs, self.backend, self.folder = (
+            scenario,
+            task_index,
+            jobs,
+            backend,
+            folder,
+        )
+        self._pool: Any = None
+        self._ray: Any = None
+        self._predictions: dict[str, Prediction] = {}
+        self._pickle: Path | None = None
+        if backend == "ray":
+            try:
+                import ray
+            except ImportError:
+                raise ExecutiveError(
+                    "--backend ray needs Ray: pip install 'humanoid-risk-executive[cluster]' "
+                    "(or pip install ray); the default --backend local needs nothing more"
+                ) from None
+            if not ray.is_initialized():
+                if os.environ.get("RAY_ADDRESS"):
+                    ray.init(address=os.environ["RAY_ADDRESS"], log_to_driver=False)
+                else:
+                    ray.init(num_cpus=jobs, include_dashboard=False, log_to_driver=False)
+            self._ray = ray
+        elif jobs > 1:
+            import multiprocessing
+
+            # spawn, not fork: a worker starts clean (no inherited MuJoCo/GL state, no threads).
+            ctx = multiprocessing.get_context("spawn")
+            self._pool = ctx.Pool(jobs, initializer=_init_worker, initargs=(scenario, task_index))
+        else:
+            _init_worker(scenario, task_index)
+
+    def predict(self, alternatives: Sequence[str]) -> dict[str, Prediction]:
+        if self._ray is not None:
+            remote = self._ray.remote(_ray_predict)
+            refs = [remote.remote(self.scenario, self.task_index, a) for a in alternatives]
+            out = self._ray.get(refs)
+        elif self._pool is not None:
+            out = self._pool.map(_predict_in_worker, alternatives, chunksize=1)
+        else:
+            out = [_predict_in_worker(a) for a in alternatives]
+        self._predictions = {p.alternative: p for p in out}
+        return self._predictions
+
+    def trials(self, specs: Sequence[tuple[int, str, int]]) -> Iterator[dict[str, Any]]:
+        if self._ray is not None:
+            ray = self._ray
+            remote = ray.remote(_ray_trial)
+            preds = ray.put(self._predictions)
+            refs = [remote.remote(self.scenario, self.task_index, preds, i, a, s) for i, a, s in specs]
+            for ref in refs:
+                yield ray.get(ref)
+            return
+        self._pickle = self.folder / ".predictions.pkl"
+        with self._pickle.open("wb") as f:
+            pickle.dump(self._predictions, f, protocol=pickle.HIGHEST_PROTOCOL)
+        path = str(self._pickle)
+        work = [(path, i, a, s) for i, a, s in specs]
+        if self._pool is not None:
+            yield from self._pool.imap(_trial_in_worker, work, chunksize=1)
+        else:
+            for spec in work:
+                yield _trial_in_worker(spec)
+
+    def close(self, *, terminate: bool = False) -> None:
+        if self._pool is not None:
+            if terminate:
+                self._pool.terminate()
+            else:
+                self._pool.close()
+            self._pool.join()
+            self._pool = None
+        if self._pickle is not None and self._pickle.exists():
+            self._pickle.unlink()
+
+
+# --- statistics --------------------------------------------------------------------------------
+
+
+def _rate(failures: int, trials: int) -> dict[str, Any]:
+    from executive.stats import clopper_pearson
+
+    low, high = clopper_pearson(failures, trials)
+    return {"value": failures / trials if trials else None, "ci95": [low, high]}
+
+
+def _finite(x: float) -> float | None:
+    return x if math.isfinite(x) else None
+
+
+def summarise(
+    scenario: Scenario,
+    records: Sequence[dict[str, Any]],
+    alternatives: Sequence[str],
+    predictions: dict[str, Prediction],
+) -> dict[str, Any]:
+    """Per alternative: trials, failures by mode, failure rates with 95% Clopper-Pearson
+    intervals, mean predicted risk; overall: AUC, Brier and ECE per mode and Spearman."""
+    from executive.stats import brier, expected_calibration_error, roc_auc, spearman
+
+    executed = [r for r in records if r["outcome"] not in ("infeasible", "error")]
+    per_alt = []
+    ordering = scenario.risk.ordering
+    for name in alternatives:
+        mine = [r for r in executed if r["alternative"] == name]
+        n = len(mine)
+        failures = {m: sum(r["outcome"] == m for r in mine) for m in FAILURE_MODES}
+        failures["any"] = sum(r["outcome"] != "success" for r in mine)
+        prediction = predictions.get(name)
+        predicted: dict[str, float | None] = {}
+        if mine:
+            keys = ("collision", "fall", "grasp", "combined", "weighted_sum", "expected_loss")
+            predicted = {k: float(np.mean([r["predicted"][k] for r in mine])) for k in keys}
+            predicted["value"] = predicted.get(ordering)
+        per_alt.append(
+            {
+                "name": name,
+                "feasible": bool(prediction.feasible) if prediction else None,
+                "error": prediction.error if prediction and not prediction.feasible else "",
+                "trials": n,
+                "errors": sum(r["outcome"] == "error" for r in records if r["alternative"] == name),
+                "failures": failures,
+                "failure_rate": _rate(failures["any"], n),
+                "failure_rate_by_mode": {m: _rate(failures[m], n) for m in FAILURE_MODES},
+                "predicted": predicted,
+            }
+        )
+    auc: dict[str, float | None] = {}
+    brier_by: dict[str, float | None] = {}
+    ece_by: dict[str, float | None] = {}
+    observed_by: dict[str, int] = {}
+    for mode, key in {**PREDICTOR, "any": "combined"}.items():
+        p = np.array([r["predicted"][key] for r in executed], dtype=float)
+        y = np.array([r["outcome"] != "success" if mode == "any" else r["outcome"] == mode for r in executed])
+        observed_by[mode] = int(y.sum())
+        auc[mode] = _finite(roc_auc(p, y))
+        brier_by[mode] = _finite(brier(p, y))
+        ece_by[mode] = _finite(expected_calibration_error(p, y))
+    ran = [a for a in per_alt if a["trials"]]
+    rho = {
+        q: _finite(spearman([a["predicted"][q] for a in ran], [a["failure_rate"]["value"] for a in ran]))
+        for q in ("combined", ordering)
+    }
+    return {
+        "scenario": scenario.name,
+        "task": None,
+        "ordering": ordering,
+        "trials_executed": len(executed),
+        "alternatives": per_alt,
+        "observed_failures": observed_by,
+        "auc": auc,
+        "brier": brier_by,
+        "ece": ece_by,
+        "spearman": rho[ordering],
+        "spearman_by": rho,
+        "predictor": {**PREDICTOR, "any": "combined"},
+    }
+
+
+def _pct(rate: dict[str, Any]) -> str:
+    value = rate["value"]
+    return "-" if value is None else f"{100 * value:.0f}%"
+
+
+def _ci(rate: dict[str, Any]) -> str:
+    low, high = rate["ci95"]
+    return f"[{100 * low:.0f}, {100 * high:.0f}]"
+
+
+def _num(x: float | None, fmt: str = ".3f") -> str:
+    return "-" if x is None else format(x, fmt)
+
+
+def table_text(summary: dict[str, Any]) -> str:
+    """The seed's Table 1, at scale: predicted risk and observed failures per alternative."""
+    head = (
+        f"{'alternative':<15}{'trials':>7} | {'P(coll)':>8}{'P(fall)':>8}{'P(grasp)':>9}{'P(any)':>8}"
+        f"{'exp.loss':>9} | {'coll.':>6}{'fall':>6}{'drop':>6}{'unst.':>6}{'t/o':>6}{'any':>6}  95% CI"
+    )
+    lines = ["predicted (on the estimate)  vs  observed (detectors, in physics)", head]
+    for a in summary["alternatives"]:
+        if not a["trials"]:
+            lines.append(f"{a['name']:<15}{0:>7} | infeasible: {a['error'][:80]}")
+            continue
+        p, f = a["predicted"], a["failure_rate_by_mode"]
+        lines.append(
+            f"{a['name']:<15}{a['trials']:>7} | {p['collision']:>8.4f}{p['fall']:>8.4f}{p['grasp']:>9.4f}"
+            f"{p['combined']:>8.4f}{p['expected_loss']:>9.4f} | "
+            + "".join(f"{_pct(f[m]):>6}" for m in FAILURE_MODES)
+            + f"{_pct(a['failure_rate']):>6}  {_ci(a['failure_rate'])}"
+        )
+    auc, b, e = summary["auc"], summary["brier"], summary["ece"]
+    lines.append(
+        "AUC    " + "  ".join(f"{m} {_num(auc[m])} ({summary['observed_failures'][m]} observed)" for m in auc)
+    )
+    lines.append("Brier  " + "  ".join(f"{m} {_num(b[m], '.4f')}" for m in b))
+    lines.append("ECE    " + "  ".join(f"{m} {_num(e[m], '.4f')}" for m in e))
+    lines.append(
+        f"Spearman (predicted {summary['ordering']} vs observed failure rate, per alternative): "
+        f"{_num(summary['spearman'], '.2f')}"
+    )
+    return "\n".join(lines)
+
+
+def table_markdown(summary: dict[str, Any]) -> str:
+    """:func:`table_text` as a markdown table (for a README or a report)."""
+    rows = [
+        "| alternative | trials | P(collision) | P(fall) | P(grasp) | P(any) | collision | fall | drop "
+        "| unstable | timeout | any failure (95% CI) |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for a in summary["alternatives"]:
+        if not a["trials"]:
+            rows.append(f"| {a['name']} | 0 | infeasible | | | | | | | | | |")
+            continue
+        p, f = a["predicted"], a["failure_rate_by_mode"]
+        rows.append(
+            f"| {a['name']} | {a['trials']} | {p['collision']:.4f} | {p['fall']:.4f} | {p['grasp']:.4f} "
+            f"| {p['combined']:.4f} | "
+            + " | ".join(_pct(f[m]) for m in FAILURE_MODES)
+            + f" | {_pct(a['failure_rate'])} {_ci(a['failure_rate'])} |"
+        )
+    auc, b, e = summary["auc"], summary["brier"], summary["ece"]
+    rows.append("")
+    rows.append("| failure mode | predicted by | observed | ROC AUC | Brier | ECE |")
+    rows.append("|---|---|---:|---:|---:|---:|")
+    for m in auc:
+        rows.append(
+            f"| {m} | P({summary['predictor'][m]}) | {summary['observed_failures'][m]} | {_num(auc[m])} "
+            f"| {_num(b[m], '.4f')} | {_num(e[m], '.4f')} |"
+        )
+    rows.append("")
+    rows.append(
+        f"Spearman rank correlation, predicted {summary['ordering']} vs observed failure rate "
+        f"across alternatives: {_num(summary['spearman'], '.2f')}"
+    )
+    return "\n".join(rows)
+
+
+def _reliability(records: Sequence[dict[str, Any]], path: Path) -> Path:
+    from executive.stats import reliability_diagram
+
+    executed = [r for r in records if r["outcome"] not in ("infeasible", "error")]
+    curves = []
+    for mode, key in {**PREDICTOR, "any": "combined"}.items():
+        p = [r["predicted"][key] for r in executed]
+        y = [r["outcome"] != "success" if mode == "any" else r["outcome"] == mode for r in executed]
+        curves.append((f"{mode} by P({key})", p, y))
+    return reliability_diagram(curves, path)
+
+
+# --- the campaign ------------------------------------------------------------------------------
+
+
+@dataclass
+class CampaignResult:
+    folder: Path
+    summary: dict[str, Any]
+    records: list[dict[str, Any]]
+    new_trials: int
+    elapsed_s: float
+    interrupted: bool = False
+
+    @property
+    def trials_per_s(self) -> float:
+        return self.new_trials / self.elapsed_s if self.elapsed_s > 0 else float("nan")
+
+
+def _fingerprint(scenario: Scenario) -> str:
+    """SHA-256 of the scenario as loaded (its YAML file when it has one)."""
+    if scenario.source is not None and Path(scenario.source).is_file():
+        return hashlib.sha256(Path(scenario.source).read_bytes()).hexdigest()
+    return hashlib.sha256(repr(scenario).encode()).hexdigest()
+
+
+def _check_resume(folder: Path, config: dict[str, Any]) -> None:
+    path = folder / "campaign.json"
+    if not path.is_file():
+        raise ExecutiveError(f"--resume: {folder} holds no campaign.json (is it a campaign's run folder?)")
+    old = json.loads(path.read_text(encoding="utf-8"))
+    for key in ("scenario", "scenario_sha256", "seed", "task", "alternatives"):
+        if old.get(key) != config[key]:
+            raise ExecutiveError(
+                f"--resume: the campaign in {folder} was made with {key} = {old.get(key)!r}; this run asks "
+                f"for {config[key]!r}. Resume with the same scenario, seed, task and alternatives, "
+                "or start a new campaign with another --out"
+            )
+
+
+def run_campaign(
+    scenario: Scenario,
+    *,
+    trials: int | None = None,
+    jobs: int = 1,
+    out: Path | str | None = None,
+    resume: bool = False,
+    backend: Backend = "local",
+    seed: int | None = None,
+    task_index: int = 0,
+    alternatives: Sequence[str] | None = None,
+    stream: IO[str] | None = None,
+) -> CampaignResult:
+    """Run (or complete) a campaign; write trials.jsonl, summary.json, table.md, reliability.png."""
+    from executive.audit import run_folder, to_json, write_summary
+    from executive.progress_bar import ProgressBar
+
+    n = scenario.trials.count if trials is None else trials
+    if n < 1:
+        raise ExecutiveError(f"--trials must be at least 1; got {n}")
+    if jobs < 1:
+        raise ExecutiveError(f"--jobs must be at least 1; got {jobs}")
+    if backend not in ("local", "ray"):
+        raise ExecutiveError(f"unknown backend '{backend}'; valid: local, ray")
+    if not 0 <= task_index < len(scenario.mission):
+        raise ExecutiveError(f"{scenario.name} has {len(scenario.mission)} task(s); no task {task_index}")
+    task = scenario.mission[task_index]
+    names = list(alternatives) if alternatives else list(task.alternatives)
+    unknown = [a for a in names if a not in task.alternatives]
+    if unknown:
+        raise ExecutiveError(
+            f"task {task_index} of {scenario.name} has no alternative {', '.join(unknown)}; "
+            f"its alternatives are: {', '.join(task.alternatives)}"
+        )
+    base_seed = scenario.trials.seed if seed is None else seed
+    if out is None:
+        if resume:
+            raise ExecutiveError("--resume needs --out DIR: the run folder of the campaign to complete")
+        folder = run_folder(f"{scenario.name}-campaign")
+    else:
+        folder = Path(out)
+    trials_path = folder / "trials.jsonl"
+    config = {
+        "scenario": scenario.name,
+        "source": str(scenario.source) if scenario.source else None,
+        "scenario_sha256": _fingerprint(scenario),
+        "seed": base_seed,
+        "task": task_index,
+        "alternatives": names,
+        "trials": n,
+    }
+    if resume:
+        _check_resume(folder, config)
+    elif trials_path.exists() and trials_path.stat().st_size > 0:
+        raise ExecutiveError(
+            f"{trials_path} already holds trials: add --resume to complete that campaign, "
+            "or choose another --out"
+        )
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "campaign.json").write_text(json.dumps(config, indent=2) + "\n", encoding="utf-8")
+
+    records = read_trials(trials_path, repair=True)
+    done = {(r["trial"], r["alternative"]) for r in records}
+    specs = [(i, a, trial_seed(base_seed, i)) for i in range(n) for a in names if (i, a) not in done]
+    log = print if stream is None else (lambda text: (stream.write(text + "\n"), stream.flush()))
+    log(
+        f"campaign {scenario.name}: task {task_index} ({task.object}), "
+        f"{n} trials x {len(names)} alternatives "
+        f"({', '.join(names)}), seed {base_seed}, {jobs} job(s) on {backend}; run folder {folder}"
+    )
+    if records:
+        log(f"resuming: {len(records)} trial(s) already in {trials_path.name}, {len(specs)} to run")
+    t0 = time.perf_counter()
+    runner = _Runner(scenario, task_index, jobs, backend, folder)
+    interrupted = False
+    new = 0
+    trial_log = TrialLog(trials_path)
+    bar: ProgressBar | None = None
+    predictions: dict[str, Prediction] = {}
+    try:
+        log(f"planning {', '.join(names)} on the estimate")
+        predictions = runner.predict(names)
+        for name in names:
+            p = predictions[name]
+            if p.feasible and p.risk is not None:
+                log(f"  {name:<15} P(any) {p.risk['combined']:.4f}  {scenario.risk.ordering} {p.value:.4f}")
+            else:
+                log(f"  {name:<15} infeasible: {p.error}")
+        bar = ProgressBar(len(records) + len(specs), done=len(records), stream=stream)
+        bar.draw(force=True)
+        failures = sum(r["outcome"] != "success" for r in records)
+        for record in runner.trials(specs):
+            trial_log.write(record)
+            records.append(record)
+            new += 1
+            failures += record["outcome"] != "success"
+            bar.advance(extra=f"{failures} failed")
+        bar.close()
+        runner.close()
+    except KeyboardInterrupt:  # stop the workers; every finished trial is already on disk
+        interrupted = True
+        runner.close(terminate=True)
+        if bar is not None:
+            bar.close()
+    finally:
+        trial_log.close()
+        runner.close(terminate=True)
+    elapsed = time.perf_counter() - t0
+    records.sort(
+        key=lambda r: (r["trial"], names.index(r["alternative"]) if r["alternative"] in names else 0)
+    )
+    summary = summarise(scenario, records, names, predictions)
+    summary.update(
+        task=f"{task_index}: transfer {task.object}",
+        seed=base_seed,
+        trials_per_alternative=n,
+        complete=len(records) == n * len(names),
+        jobs=jobs,
+        backend=backend,
+        elapsed_s=elapsed,
+        new_trials=new,
+        trials_per_s=new / elapsed if elapsed > 0 else None,
+    )
+    write_summary(folder, to_json(summary))
+    (folder / "table.md").write_text(table_markdown(summary) + "\n", encoding="utf-8")
+    if records:
+        _reliability(records, folder / "reliability.png")
+    return CampaignResult(folder, summary, records, new, elapsed, interrupted)
