@@ -642,6 +642,7 @@ def run_campaign(
     trial_log = TrialLog(trials_path)
     bar: ProgressBar | None = None
     predictions: dict[str, Prediction] = {}
+    trial_phase = float("nan")
     try:
         log(f"planning {', '.join(names)} on the estimate")
         predictions = runner.predict(names)
@@ -651,6 +652,7 @@ def run_campaign(
                 log(f"  {name:<15} P(any) {p.risk['combined']:.4f}  {scenario.risk.ordering} {p.value:.4f}")
             else:
                 log(f"  {name:<15} infeasible: {p.error}")
+        t_trials = time.perf_counter()
         bar = ProgressBar(len(records) + len(specs), done=len(records), stream=stream)
         bar.draw(force=True)
         failures = sum(r["outcome"] != "success" for r in records)
@@ -661,6 +663,7 @@ def run_campaign(
             failures += record["outcome"] != "success"
             bar.advance(extra=f"{failures} failed")
         bar.close()
+        trial_phase = time.perf_counter() - t_trials
         runner.close()
     except KeyboardInterrupt:  # stop the workers; every finished trial is already on disk
         interrupted = True
@@ -685,6 +688,7 @@ def run_campaign(
         elapsed_s=elapsed,
         new_trials=new,
         trials_per_s=new / elapsed if elapsed > 0 else None,
+        trial_phase_s=_finite(trial_phase),  # executing trials only (after planning, before statistics)
     )
     write_summary(folder, to_json(summary))
     (folder / "table.md").write_text(table_markdown(summary) + "\n", encoding="utf-8")
