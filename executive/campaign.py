@@ -402,6 +402,11 @@ def summarise(
             }
         )
     auc: dict[str, float | None] = {}
+    # The best AUC any prediction that is the same for every trial of an alternative can reach:
+    # score each trial by its alternative's observed rate of that mode (an oracle ranking). With
+    # one fixed estimate every trial of an alternative has the same prediction, so the AUC of
+    # the risk models is bounded by this, however good they are.
+    ceiling: dict[str, float | None] = {}
     brier_by: dict[str, float | None] = {}
     ece_by: dict[str, float | None] = {}
     observed_by: dict[str, int] = {}
@@ -410,6 +415,11 @@ def summarise(
         y = np.array([r["outcome"] != "success" if mode == "any" else r["outcome"] == mode for r in executed])
         observed_by[mode] = int(y.sum())
         auc[mode] = _finite(roc_auc(p, y))
+        rate = {
+            a: float(np.mean([yy for r, yy in zip(executed, y, strict=True) if r["alternative"] == a]))
+            for a in {r["alternative"] for r in executed}
+        }
+        ceiling[mode] = _finite(roc_auc([rate[r["alternative"]] for r in executed], y))
         brier_by[mode] = _finite(brier(p, y))
         ece_by[mode] = _finite(expected_calibration_error(p, y))
     ran = [a for a in per_alt if a["trials"]]
@@ -425,6 +435,7 @@ def summarise(
         "alternatives": per_alt,
         "observed_failures": observed_by,
         "auc": auc,
+        "auc_ceiling_per_alternative": ceiling,
         "brier": brier_by,
         "ece": ece_by,
         "spearman": rho[ordering],
@@ -469,6 +480,11 @@ def table_text(summary: dict[str, Any]) -> str:
     lines.append(
         "AUC    " + "  ".join(f"{m} {_num(auc[m])} ({summary['observed_failures'][m]} observed)" for m in auc)
     )
+    ceiling = summary["auc_ceiling_per_alternative"]
+    lines.append(
+        "       best AUC of any prediction constant per alternative: "
+        + "  ".join(f"{m} {_num(ceiling[m])}" for m in ceiling)
+    )
     lines.append("Brier  " + "  ".join(f"{m} {_num(b[m], '.4f')}" for m in b))
     lines.append("ECE    " + "  ".join(f"{m} {_num(e[m], '.4f')}" for m in e))
     lines.append(
@@ -498,12 +514,16 @@ def table_markdown(summary: dict[str, Any]) -> str:
         )
     auc, b, e = summary["auc"], summary["brier"], summary["ece"]
     rows.append("")
-    rows.append("| failure mode | predicted by | observed | ROC AUC | Brier | ECE |")
-    rows.append("|---|---|---:|---:|---:|---:|")
+    ceiling = summary["auc_ceiling_per_alternative"]
+    rows.append(
+        "| failure mode | predicted by | observed | ROC AUC | best AUC if constant per alternative "
+        "| Brier | ECE |"
+    )
+    rows.append("|---|---|---:|---:|---:|---:|---:|")
     for m in auc:
         rows.append(
             f"| {m} | P({summary['predictor'][m]}) | {summary['observed_failures'][m]} | {_num(auc[m])} "
-            f"| {_num(b[m], '.4f')} | {_num(e[m], '.4f')} |"
+            f"| {_num(ceiling[m])} | {_num(b[m], '.4f')} | {_num(e[m], '.4f')} |"
         )
     rows.append("")
     rows.append(

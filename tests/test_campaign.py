@@ -103,6 +103,11 @@ def test_summary_counts_and_intervals_come_from_the_trials(reference: Path) -> N
         assert alt["predicted"]["collision"] == pytest.approx(mine[0]["predicted"]["collision"])
     for key in ("auc", "brier", "ece", "spearman"):
         assert key in summary
+    # ranking the alternatives by their observed rates is the best any per-alternative constant
+    # prediction can do (Neyman-Pearson: order groups by likelihood ratio, monotone in the rate)
+    for mode, auc in summary["auc"].items():
+        if auc is not None:
+            assert auc <= summary["auc_ceiling_per_alternative"][mode] + 1e-12
     assert (reference / "reliability.png").read_bytes()[:4] == b"\x89PNG"
     assert "| left_to_right |" in (reference / "table.md").read_text()
 
