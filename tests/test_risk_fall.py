@@ -69,6 +69,24 @@ def test_centred_rectangle_exact_and_boole() -> None:
     print(f"Boole {boole:.6f}, max edge {np.max(p):.6f}")
 
 
+@pytest.mark.parametrize("method", ["owens_t", "quadrature"])
+@pytest.mark.parametrize("sigma", [0.01, 0.005, 0.002])
+def test_small_tail_probabilities_keep_their_relative_accuracy(method: str, sigma: float) -> None:
+    """Far inside the polygon P(outside) is tiny; 1 - P(inside) would give 0 or 2.2e-16 noise."""
+    # Independent axes: P(outside) = 1 - (1 - 2 p_x)(1 - 2 p_y) = 2 p_x + 2 p_y - 4 p_x p_y, all tails.
+    px, py = ndtr(-0.10 / sigma), ndtr(-0.05 / sigma)
+    expected = 2.0 * px + 2.0 * py - 4.0 * px * py
+    got = probability_outside(RECT, [0.0, 0.0], sigma**2 * np.eye(2), method=method)  # type: ignore[arg-type]
+    assert got == pytest.approx(expected, rel=1e-9)
+    # A correlated covariance off-centre: inside Boole's bracket, and (tails nearly disjoint)
+    # within 1e-6 relative of the Boole sum.
+    cov = sigma**2 * np.array([[1.0, 0.3], [0.3, 0.5]])
+    p = edge_probabilities(_hexagon(), [0.01, 0.0], cov)
+    got = probability_outside(_hexagon(), [0.01, 0.0], cov, method=method)  # type: ignore[arg-type]
+    assert np.max(p) * (1.0 - 1e-12) <= got <= np.sum(p) * (1.0 + 1e-12)
+    assert got == pytest.approx(np.sum(p), rel=1e-6)
+
+
 def test_hexagon_correlated_exact_matches_monte_carlo() -> None:
     poly = _hexagon()
     mean = np.array([0.05, 0.02])

@@ -159,7 +159,22 @@ def _inside_owens_t(z: FloatArray) -> float:
     return float(np.sum(np.sign(c) * (right_triangle(sb) - right_triangle(sa))))
 
 
-def _inside_quadrature(z: FloatArray, panel: float = 0.5, order: int = 20) -> float:
+def _outside_owens_t(z: FloatArray) -> float:
+    """P(outside) for a whitened polygon strictly around the origin, without 1 - P(inside).
+
+    With the origin inside, the edges' angles sum to 2 pi, so the angular parts of
+    :func:`_inside_owens_t` sum to 1 and P(outside) = sum_i [T(h_i, s_b/h_i) - T(h_i, s_a/h_i)]
+    (Owen 1956): every term is a non-negative mass beyond edge i in its wedge, so a tail of
+    1e-20 keeps its relative accuracy (1 - P(inside) bottoms out at the double's 2.2e-16).
+    """
+    c, sa, sb = _edges_local(z)
+    with np.errstate(over="ignore"):
+        return float(np.sum(owens_t(c, sb / c) - owens_t(c, sa / c)))
+
+
+def _polar_quadrature(z: FloatArray, integrand: str, panel: float = 0.5, order: int = 20) -> float:
+    """(1/2 pi) sum_i c_i int g(c_i^2 + s^2) ds along each edge, composite Gauss-Legendre; g(r2) is
+    (1 - e^{-r2/2}) / r2 (``inside``) or e^{-r2/2} / r2 (``outside``, origin strictly inside)."""
     c, sa, sb = _edges_local(z)
     x, w = np.polynomial.legendre.leggauss(order)
     total = 0.0
@@ -173,9 +188,16 @@ def _inside_quadrature(z: FloatArray, panel: float = 0.5, order: int = 20) -> fl
         s = (mid[:, None] + half[:, None] * x[None, :]).ravel()
         weights = (half[:, None] * w[None, :]).ravel()
         r2 = ci * ci + s * s
-        g = -np.expm1(-0.5 * r2) / r2  # (1 - e^{-r^2/2}) / r^2, smooth (-> 1/2 at r = 0)
+        if integrand == "inside":
+            g = -np.expm1(-0.5 * r2) / r2  # (1 - e^{-r^2/2}) / r^2, smooth (-> 1/2 at r = 0)
+        else:
+            g = np.exp(-0.5 * r2) / r2
         total += ci * float(np.sum(weights * g))
     return total / (2.0 * np.pi)
+
+
+def _inside_quadrature(z: FloatArray) -> float:
+    return _polar_quadrature(z, "inside")
 
 
 def probability_outside(
@@ -187,7 +209,9 @@ def probability_outside(
     """Exact P(X outside the polygon), X ~ N(mean, cov), by whitening and signed triangles.
 
     ``owens_t`` uses the closed form with Owen's T function; ``quadrature`` integrates the
-    polar-reduced density along each edge with composite Gauss-Legendre (both ~1e-12).
+    polar-reduced density along each edge with composite Gauss-Legendre (both ~1e-12). With
+    the mean strictly inside, the tails beyond the edges are summed directly (not 1 - P(inside)),
+    so a small probability keeps its relative accuracy down to the smallest doubles.
     A zero covariance gives the indicator of the mean being outside.
     """
     v = check_polygon(polygon)
@@ -196,12 +220,17 @@ def probability_outside(
     z = _whiten(v, mu, c)
     if z is None:
         return 1.0 if signed_margin(v, mu) < 0.0 else 0.0
-    if method == "owens_t":
-        inside = _inside_owens_t(z)
-    elif method == "quadrature":
-        inside = _inside_quadrature(z)
-    else:
+    if method not in ("owens_t", "quadrature"):
         raise ValueError(f"probability_outside: method must be 'owens_t' or 'quadrature', got {method!r}")
+    # The mean strictly inside: sum the tails directly. The quadrature's tail integrand
+    # e^{-r^2/2} / r^2 peaks with width c along an edge, too sharp for its 0.5-wide panels when
+    # an edge is nearer than 1 sigma (then P(outside) > Phi(-1) and 1 - P(inside) is accurate).
+    c_min = float(np.min(_edges_local(z)[0]))
+    if method == "owens_t" and c_min > 0.0:
+        return float(np.clip(_outside_owens_t(z), 0.0, 1.0))
+    if method == "quadrature" and c_min >= 1.0:
+        return float(np.clip(_polar_quadrature(z, "outside"), 0.0, 1.0))
+    inside = _inside_owens_t(z) if method == "owens_t" else _inside_quadrature(z)
     return float(np.clip(1.0 - inside, 0.0, 1.0))
 
 
