@@ -33,6 +33,7 @@ when ``RAY_ADDRESS`` is set, else a local Ray instance with ``jobs`` CPUs).
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -48,7 +49,8 @@ from typing import IO, Any, Literal
 import numpy as np
 
 from executive.errors import ExecutiveError
-from executive.scenario_types import Scenario
+from executive.scenario_types import Scenario, SceneVariation
+from executive.world import Perturbation
 
 __all__ = [
     "FAILURE_MODES",
@@ -110,31 +112,89 @@ def trial_seed(base_seed: int, index: int) -> int:
     return base_seed + index
 
 
-def run_trial(
-    scenario: Scenario, task_index: int, prediction: Prediction, index: int, seed: int
-) -> dict[str, Any]:
-    """Execute one trial; the record written to ``trials.jsonl`` (JSON-safe, no timings)."""
-    from executive.runner import execute_plan
-    from executive.world import build, sample_perturbation
+def vary_scene(
+    scenario: Scenario, variation: SceneVariation, rng: np.random.Generator
+) -> tuple[Scenario, dict[str, Any]]:
+    """A trial's scene: every object and obstacle of ``scenario`` shifted by a draw of ``variation``.
 
-    perturbation = sample_perturbation(scenario, np.random.default_rng(seed))
+    Draws in a fixed order (objects: dx, dy, dyaw; then obstacles: dx, dy). Returns the
+    shifted scenario (the trial's estimate) and the shifts, for the record.
+    """
+    objects, obstacles = [], []
+    shifts: dict[str, Any] = {"object_offsets": {}, "obstacle_offsets": {}}
+    for body in scenario.scene.objects:
+        dx, dy = rng.normal(0.0, variation.object_position, 2) if variation.object_position else (0.0, 0.0)
+        dyaw = float(rng.normal(0.0, variation.object_yaw_rad)) if variation.object_yaw_rad else 0.0
+        x, y, z = body.position
+        roll, pitch, yaw = body.orientation_rad
+        objects.append(
+            dataclasses.replace(body, position=(x + dx, y + dy, z), orientation_rad=(roll, pitch, yaw + dyaw))
+        )
+        shifts["object_offsets"][body.name] = [float(dx), float(dy), dyaw]
+    for body in scenario.scene.obstacles:
+        dx, dy = (
+            rng.normal(0.0, variation.obstacle_position, 2) if variation.obstacle_position else (0.0, 0.0)
+        )
+        x, y, z = body.position
+        obstacles.append(dataclasses.replace(body, position=(x + dx, y + dy, z)))
+        shifts["obstacle_offsets"][body.name] = [float(dx), float(dy)]
+    scene = dataclasses.replace(scenario.scene, objects=tuple(objects), obstacles=tuple(obstacles))
+    return dataclasses.replace(scenario, scene=scene), _perturbation_json(shifts)
+
+
+def trial_scene(scenario: Scenario, seed: int) -> tuple[Scenario, Perturbation, dict[str, Any] | None]:
+    """Trial ``seed``'s estimate (the scenario, or a varied scene), its truth, and the variation.
+
+    One generator per trial: first the scene variation (when the scenario has one), then the
+    truth's perturbation from the estimate's uncertainty (:func:`executive.world.sample_perturbation`).
+    """
+    from executive.world import sample_perturbation
+
+    rng = np.random.default_rng(seed)
+    variation = scenario.trials.scene_variation
+    if variation.is_zero():
+        return scenario, sample_perturbation(scenario, rng), None
+    estimate, shifts = vary_scene(scenario, variation, rng)
+    return estimate, sample_perturbation(estimate, rng), shifts
+
+
+def run_trial(
+    scenario: Scenario,
+    task_index: int,
+    alternative: str,
+    index: int,
+    seed: int,
+    prediction: Prediction | None = None,
+) -> dict[str, Any]:
+    """Execute one trial; the record written to ``trials.jsonl`` (JSON-safe, no timings).
+
+    ``prediction``: the alternative planned on the scenario's fixed estimate (None: plan it
+    here, on the trial's own scene, as a scenario with a scene variation needs).
+    """
+    from executive.runner import execute_plan
+    from executive.world import build
+
+    estimate, perturbation, shifts = trial_scene(scenario, seed)
+    if prediction is None or shifts is not None:
+        prediction = predict(estimate, task_index, alternative)
     record: dict[str, Any] = {
         "trial": index,
-        "alternative": prediction.alternative,
+        "alternative": alternative,
         "seed": seed,
         "outcome": "infeasible",
         "failure": None,
         "placement_error_m": None,
         "sim_time_s": 0.0,
         "predicted": prediction.risk,
+        "scene": shifts,
         "truth": _perturbation_json(asdict(perturbation)),
     }
     if not prediction.feasible:
         record["failure"] = {"mode": "infeasible", "detail": prediction.error}
         return record
     try:
-        truth = build(scenario, perturbation, kind="truth")
-        result = execute_plan(prediction.plan, truth, scenario.mission[task_index])
+        truth = build(estimate, perturbation, kind="truth")
+        result = execute_plan(prediction.plan, truth, estimate.mission[task_index])
     except Exception as exc:  # a defect in a trial must not end the campaign; it is counted
         record["outcome"] = "error"
         last = traceback.extract_tb(exc.__traceback__)[-1]
@@ -241,14 +301,14 @@ def _predict_in_worker(alternative: str) -> Prediction:
     return predict(_WORKER["scenario"], _WORKER["task_index"], alternative)
 
 
-def _trial_in_worker(spec: tuple[str, int, str, int]) -> dict[str, Any]:
+def _trial_in_worker(spec: tuple[str | None, int, str, int]) -> dict[str, Any]:
     path, index, alternative, seed = spec
-    if _WORKER["path"] != path:  # the predictions (with their plans) once per worker
+    if path is not None and _WORKER["path"] != path:  # the predictions (with their plans) once
         with open(path, "rb") as f:
             _WORKER["predictions"] = pickle.load(f)
         _WORKER["path"] = path
-    prediction = _WORKER["predictions"][alternative]
-    return run_trial(_WORKER["scenario"], _WORKER["task_index"], prediction, index, seed)
+    prediction = _WORKER["predictions"].get(alternative) if path is not None else None
+    return run_trial(_WORKER["scenario"], _WORKER["task_index"], alternative, index, seed, prediction)
 
 
 def _ray_predict(scenario: Scenario, task_index: int, alternative: str) -> Prediction:
@@ -263,7 +323,7 @@ def _ray_trial(
     alternative: str,
     seed: int,
 ) -> dict[str, Any]:
-    return run_trial(scenario, task_index, predictions[alternative], index, seed)
+    return run_trial(scenario, task_index, alternative, index, seed, predictions.get(alternative))
 
 
 class _Runner:
@@ -327,10 +387,12 @@ class _Runner:
             for ref in refs:
                 yield ray.get(ref)
             return
-        self._pickle = self.folder / ".predictions.pkl"
-        with self._pickle.open("wb") as f:
-            pickle.dump(self._predictions, f, protocol=pickle.HIGHEST_PROTOCOL)
-        path = str(self._pickle)
+        path: str | None = None
+        if self._predictions:  # a fixed estimate: the plans go to the workers once, by file
+            self._pickle = self.folder / ".predictions.pkl"
+            with self._pickle.open("wb") as f:
+                pickle.dump(self._predictions, f, protocol=pickle.HIGHEST_PROTOCOL)
+            path = str(self._pickle)
         work = [(path, i, a, s) for i, a, s in specs]
         if self._pool is not None:
             yield from self._pool.imap(_trial_in_worker, work, chunksize=1)
@@ -395,6 +457,7 @@ def summarise(
                 "error": prediction.error if prediction and not prediction.feasible else "",
                 "trials": n,
                 "errors": sum(r["outcome"] == "error" for r in records if r["alternative"] == name),
+                "infeasible": sum(r["outcome"] == "infeasible" for r in records if r["alternative"] == name),
                 "failures": failures,
                 "failure_rate": _rate(failures["any"], n),
                 "failure_rate_by_mode": {m: _rate(failures[m], n) for m in FAILURE_MODES},
@@ -664,9 +727,13 @@ def run_campaign(
     predictions: dict[str, Prediction] = {}
     trial_phase = float("nan")
     try:
-        log(f"planning {', '.join(names)} on the estimate")
-        predictions = runner.predict(names)
-        for name in names:
+        varied = not scenario.trials.scene_variation.is_zero()
+        if varied:
+            log("the scene varies from trial to trial (trials.scene_variation): each trial plans on its own")
+        else:
+            log(f"planning {', '.join(names)} on the estimate")
+            predictions = runner.predict(names)
+        for name in predictions:
             p = predictions[name]
             if p.feasible and p.risk is not None:
                 log(f"  {name:<15} P(any) {p.risk['combined']:.4f}  {scenario.risk.ordering} {p.value:.4f}")

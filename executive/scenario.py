@@ -30,6 +30,7 @@ from executive.scenario_types import (
     RobotSpec,
     Scenario,
     SceneConfig,
+    SceneVariation,
     Severity,
     TransferTask,
     TrialsConfig,
@@ -225,7 +226,24 @@ def _trials(node: Node) -> TrialsConfig:
     return read_fields(
         node,
         TrialsConfig,
-        {"count": ("count", lambda n: n.integer(ge=1)), "seed": ("seed", lambda n: n.integer(ge=0))},
+        {
+            "count": ("count", lambda n: n.integer(ge=1)),
+            "seed": ("seed", lambda n: n.integer(ge=0)),
+            "scene_variation": ("scene_variation", _scene_variation),
+        },
+    )
+
+
+def _scene_variation(node: Node) -> SceneVariation:
+    nonneg = Node.non_negative
+    return read_fields(
+        node,
+        SceneVariation,
+        {
+            "object_position": ("object_position", nonneg),
+            "object_yaw": ("object_yaw_rad", _deg_non_negative),
+            "obstacle_position": ("obstacle_position", nonneg),
+        },
     )
 
 

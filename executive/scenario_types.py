@@ -25,6 +25,7 @@ __all__ = [
     "RobotSpec",
     "Scenario",
     "SceneConfig",
+    "SceneVariation",
     "Severity",
     "Table",
     "TransferTask",
@@ -201,9 +202,29 @@ class TransferTask:
 
 
 @dataclass(frozen=True)
+class SceneVariation:
+    """How a campaign's scenes differ from trial to trial (1-sigma, all default 0).
+
+    Unlike :class:`Uncertainty` (the error of the robot's estimate of one scene), this
+    moves the estimate itself: trial i's scene is the scenario's with each object and
+    obstacle shifted by a draw of these, and its truth is that scene plus a draw of the
+    uncertainty. Zero (the default) keeps one fixed estimate for every trial.
+    object_position, obstacle_position: m, per horizontal axis; object_yaw_rad: rad.
+    """
+
+    object_position: float = 0.0
+    object_yaw_rad: float = 0.0
+    obstacle_position: float = 0.0
+
+    def is_zero(self) -> bool:
+        return self.object_position == 0.0 and self.object_yaw_rad == 0.0 and self.obstacle_position == 0.0
+
+
+@dataclass(frozen=True)
 class TrialsConfig:
     count: int = 10
     seed: int = 0
+    scene_variation: SceneVariation = field(default_factory=SceneVariation)
 
 
 @dataclass(frozen=True)

@@ -6,8 +6,10 @@ tests of this module; the others compare against it byte for byte.
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -18,9 +20,11 @@ from typing import Any
 import numpy as np
 import pytest
 
+from executive import registry
 from executive.campaign import FAILURE_MODES, read_trials, run_campaign
 from executive.cli import main
 from executive.scenario import load
+from executive.scenario_types import Scenario, TrialsConfig
 from executive.stats import clopper_pearson
 from executive.world import build, sample_perturbation
 
@@ -28,10 +32,16 @@ ALTERNATIVES = ["left", "left_to_right"]
 TRIALS = 2
 
 
+def fixed_estimate() -> Scenario:
+    """book_transfer without its scene variation: one estimate, planned once per alternative."""
+    scenario = load("book_transfer")
+    return dataclasses.replace(scenario, trials=TrialsConfig(scenario.trials.count, scenario.trials.seed))
+
+
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory: pytest.TempPathFactory) -> Path:
     folder = tmp_path_factory.mktemp("campaign") / "jobs1"
-    scenario = load("book_transfer")
+    scenario = fixed_estimate()
     result = run_campaign(scenario, trials=TRIALS, jobs=1, out=folder, alternatives=ALTERNATIVES)
     assert result.summary["complete"] and not result.interrupted
     return folder
@@ -47,7 +57,7 @@ def test_trials_are_the_seeded_truths_executed_in_physics(reference: Path) -> No
     assert [(r["trial"], r["alternative"]) for r in records] == [
         (i, a) for i in range(TRIALS) for a in ALTERNATIVES
     ]
-    scenario = load("book_transfer")
+    scenario = fixed_estimate()
     for r in records:
         # the truth of trial i is the perturbation drawn with seed trials.seed + i, whatever the alternative
         assert r["seed"] == scenario.trials.seed + r["trial"]
@@ -76,7 +86,7 @@ def test_a_trial_reproduces_the_runner_on_its_sampled_truth(reference: Path) -> 
     from executive.planning import Planner
     from executive.runner import execute_plan
 
-    scenario = load("book_transfer")
+    scenario = fixed_estimate()
     record = next(r for r in _records(reference) if r["alternative"] == "left_to_right")
     estimate = build(scenario)
     plan = plan_alternative(Planner(estimate), estimate, scenario.mission[0], "left_to_right")
@@ -114,7 +124,7 @@ def test_summary_counts_and_intervals_come_from_the_trials(reference: Path) -> N
 
 @pytest.mark.slow
 def test_two_jobs_write_the_same_trials_file(reference: Path, tmp_path: Path) -> None:
-    scenario = load("book_transfer")
+    scenario = fixed_estimate()
     result = run_campaign(scenario, trials=TRIALS, jobs=2, out=tmp_path / "jobs2", alternatives=ALTERNATIVES)
     assert result.summary["complete"]
     assert (tmp_path / "jobs2" / "trials.jsonl").read_bytes() == (reference / "trials.jsonl").read_bytes()
@@ -125,7 +135,11 @@ def test_two_jobs_write_the_same_trials_file(reference: Path, tmp_path: Path) ->
 def test_a_killed_campaign_keeps_its_trials_and_resume_completes_it(reference: Path, tmp_path: Path) -> None:
     """SIGKILL the command once a trial is on disk; --resume then gives the reference file."""
     out = tmp_path / "killed"
-    cmd = [sys.executable, "-m", "executive.cli", "campaign", "book_transfer", "--trials", str(TRIALS)]
+    yaml = tmp_path / "book_transfer_fixed.yaml"
+    text = registry.scenario_path("book_transfer").read_text()
+    yaml.write_text(re.sub(r"\n  scene_variation: .*", "", text))
+    assert fixed_estimate().trials == load(yaml).trials
+    cmd = [sys.executable, "-m", "executive.cli", "campaign", str(yaml), "--trials", str(TRIALS)]
     cmd += ["--alternatives", ",".join(ALTERNATIVES), "--out", str(out)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     trials = out / "trials.jsonl"
@@ -147,7 +161,7 @@ def test_a_killed_campaign_keeps_its_trials_and_resume_completes_it(reference: P
     # a line cut short by the kill is repaired on resume
     with trials.open("ab") as f:
         f.write(b'{"trial": 1, "altern')
-    args = ["campaign", "book_transfer", "--trials", str(TRIALS), "--alternatives", ",".join(ALTERNATIVES)]
+    args = ["campaign", str(yaml), "--trials", str(TRIALS), "--alternatives", ",".join(ALTERNATIVES)]
     code = main([*args, "--out", str(out), "--resume"])
     assert code == 0
     assert trials.read_bytes() == (reference / "trials.jsonl").read_bytes()
@@ -182,7 +196,7 @@ def test_bad_campaign_input_exits_2_with_a_message(
 def test_ray_backend_gives_the_same_trials(reference: Path, tmp_path: Path) -> None:
     """One trial as a Ray task (a local Ray instance) equals the local process's line."""
     ray = pytest.importorskip("ray")
-    scenario = load("book_transfer")
+    scenario = fixed_estimate()
     try:
         result = run_campaign(
             scenario, trials=1, jobs=1, out=tmp_path / "ray", alternatives=["left_to_right"], backend="ray"
@@ -192,3 +206,32 @@ def test_ray_backend_gives_the_same_trials(reference: Path, tmp_path: Path) -> N
     assert result.summary["backend"] == "ray"
     expected = [r for r in _records(reference) if r["trial"] == 0 and r["alternative"] == "left_to_right"]
     assert _records(tmp_path / "ray") == expected
+
+
+@pytest.mark.slow
+def test_a_varied_scene_is_planned_and_predicted_per_trial(reference: Path, tmp_path: Path) -> None:
+    """With trials.scene_variation each trial plans on its own shifted scene."""
+    from executive.campaign import predict, trial_scene
+    from executive.scenario_types import SceneVariation
+
+    base = load("book_transfer")
+    variation = SceneVariation(object_position=0.02, object_yaw_rad=np.radians(5), obstacle_position=0.02)
+    scenario = dataclasses.replace(base, trials=TrialsConfig(count=1, seed=7, scene_variation=variation))
+    result = run_campaign(scenario, out=tmp_path / "varied", alternatives=["left_to_right"])
+    (record,) = result.records
+    estimate, perturbation, shifts = trial_scene(scenario, 7)
+    assert record["scene"] == shifts
+    # the shift is a draw of the variation, applied to the scene the robot plans on
+    dx, dy, dyaw = shifts["object_offsets"]["book"]
+    assert 0 < np.hypot(dx, dy) < 5 * 0.02 and abs(dyaw) < 5 * np.radians(5)
+    book = next(b for b in estimate.scene.objects if b.name == "book")
+    nominal = next(b for b in base.scene.objects if b.name == "book")
+    assert book.position[:2] == pytest.approx((nominal.position[0] + dx, nominal.position[1] + dy))
+    # the truth's error is drawn after the variation, from the same trial generator
+    assert record["truth"]["object_offsets"]["book"] == pytest.approx(
+        list(perturbation.object_offsets["book"]), abs=1e-8
+    )
+    # the prediction is the plan's on the varied scene, not the fixed estimate's
+    assert record["predicted"] == pytest.approx(predict(estimate, 0, "left_to_right").risk)
+    fixed = next(r for r in _records(reference) if r["alternative"] == "left_to_right")["predicted"]
+    assert record["predicted"] != fixed

@@ -151,6 +151,12 @@ CASES = [
     ),
     Case("negative-seed", put("trials.seed", -1), "trials.seed", "expected an integer >= 0"),
     Case("zero-trials", put("trials.count", 0), "trials.count", "expected an integer >= 1"),
+    Case(
+        "negative-scene-variation",
+        put("trials.scene_variation", {"object_position": -0.02}),
+        "trials.scene_variation.object_position",
+        ">= 0",
+    ),
     # NaN and inf as YAML spells them
     Case(
         "nan-height",
