@@ -122,6 +122,66 @@ class JointTargetController:
         ctrl[self.feed_forward] += load[self.feed_forward] / self.kp[self.feed_forward]
         return np.clip(ctrl, self.ctrl_low, self.ctrl_high)
 
+    def period(
+        self,
+        q_target: FloatArray,
+        leg_load: FloatArray,
+        qvel_target: FloatArray | None,
+        steps: int,
+        timestep: float,
+    ) -> ServoPeriod:
+        """:meth:`joint_ctrl` for the ``steps`` physics steps of one control period, prepared at once.
+
+        Step ``k`` servos to ``q_target + k timestep qvel_target`` (the ramp) with the step's
+        ``qfrc_bias`` as the arm/waist feed-forward. Everything but ``qfrc_bias`` is known at
+        the start of the period, so it is computed here for all steps in one go;
+        :meth:`ServoPeriod.write` adds the bias of the step. The arithmetic (operands, order,
+        rounding) is that of :meth:`joint_ctrl`, so the servo targets are bit for bit equal.
+        """
+        qadr = self.qpos_adr
+        base = np.broadcast_to(q_target[qadr], (steps, len(qadr)))
+        if qvel_target is not None:
+            v = qvel_target[qadr]
+            ramp = (np.arange(steps) * timestep)[:, None] * v[None, :]
+            base = (base + ramp) + self.kv / self.kp * v
+        # Legs: the model-based load of the target; no feed-forward: + 0.0 (exact); the arms
+        # and waist get qfrc_bias / kp per step.
+        fixed = np.where(self.support, leg_load / self.kp, 0.0)
+        fixed[~self.feed_forward] = 0.0
+        base = base + fixed
+        return ServoPeriod(self, base)
+
+
+class ServoPeriod:
+    """One control period of :class:`JointTargetController`: writes each physics step's servo ctrl.
+
+    The targets of the leg joints (and of any servo without feed-forward) are complete for
+    every step; the arm and waist servos add ``qfrc_bias / kp`` of the step in :meth:`write`.
+    """
+
+    def __init__(self, controller: JointTargetController, base: FloatArray) -> None:
+        c = controller
+        bias = c.feed_forward & ~c.support
+        fixed = ~bias
+        self._fixed_act = c.actuators[fixed]
+        self._fixed_ctrl = np.clip(base[:, fixed], c.ctrl_low[fixed], c.ctrl_high[fixed])
+        self._bias_act = c.actuators[bias]
+        self._bias_dof = c.dof_adr[bias]
+        self._bias_kp = c.kp[bias]
+        self._bias_base = base[:, bias]
+        self._bias_low, self._bias_high = c.ctrl_low[bias], c.ctrl_high[bias]
+
+    def write(self, k: int, data: mujoco.MjData) -> None:
+        """Servo ctrl of the period's ``k``-th physics step into ``data.ctrl``."""
+        ctrl = data.ctrl
+        ctrl[self._fixed_act] = self._fixed_ctrl[k]
+        u = data.qfrc_bias[self._bias_dof]
+        u /= self._bias_kp
+        u += self._bias_base[k]
+        np.maximum(u, self._bias_low, out=u)  # np.clip, without its wrapper's overhead
+        np.minimum(u, self._bias_high, out=u)
+        ctrl[self._bias_act] = u
+
 
 @dataclass
 class StepStats:
@@ -149,10 +209,11 @@ class SimulatedRobot:
         self.qvel_target: FloatArray = np.zeros(self.model.nq)
         self._leg_load = self.controller.leg_load(self.q_target)
         self.gripper_ctrl: dict[str, FloatArray] = {}
-        for side, arm in world.profile.arms.items():
-            ids = world.ids.gripper_actuators[side]
-            self.gripper_ctrl[side] = self.data.ctrl[list(ids)].copy()
-            del arm
+        self._gripper_idx: dict[str, NDArray[np.intp]] = {}
+        for side in world.profile.arms:
+            ids = np.array(list(world.ids.gripper_actuators[side]), dtype=np.intp)
+            self._gripper_idx[side] = ids
+            self.gripper_ctrl[side] = self.data.ctrl[ids].copy()
         self.stats = StepStats()
 
     @property
@@ -192,24 +253,35 @@ class SimulatedRobot:
         self._leg_load = self.controller.leg_load(self.q_target)
 
     def advance(self) -> Failure | None:
-        """Step physics for one control period; stop early at the first detected failure."""
-        ctrl = self.data.ctrl
+        """Step physics for one control period; stop early at the first detected failure.
+
+        The failure detectors run after every physics step. The servo targets are those of
+        :meth:`JointTargetController.joint_ctrl` for each step (the target ramps on at
+        ``qvel_target``, the arm/waist gravity feed-forward is the step's ``qfrc_bias``); the
+        parts fixed over the period are computed once (:meth:`JointTargetController.period`).
+        """
+        data, model = self.data, self.model
         start = time.perf_counter()
         moving = bool(np.any(self.qvel_target))
+        servo = self.controller.period(
+            self.q_target,
+            self._leg_load,
+            self.qvel_target if moving else None,
+            self.substeps,
+            model.opt.timestep,
+        )
+        ctrl = data.ctrl
+        for side, values in self.gripper_ctrl.items():  # fixed over the period
+            ctrl[self._gripper_idx[side]] = values
+        write, check = servo.write, self.detector.check
+        steps = 0
         for k in range(self.substeps):
-            target = (
-                self.q_target + (k * self.model.opt.timestep) * self.qvel_target if moving else self.q_target
-            )
-            ctrl[self.controller.actuators] = self.controller.joint_ctrl(
-                target, self.data, self._leg_load, self.qvel_target if moving else None
-            )
-            for side, values in self.gripper_ctrl.items():
-                ctrl[list(self.world.ids.gripper_actuators[side])] = values
-            mujoco.mj_step(self.model, self.data)
-            self.stats.physics_steps += 1
-            failure = self.detector.check()
-            if failure is not None:
+            write(k, data)
+            mujoco.mj_step(model, data)
+            steps += 1
+            if check() is not None:
                 self.hold()
                 break
+        self.stats.physics_steps += steps
         self.stats.physics_wall_s += time.perf_counter() - start
         return self.detector.failure

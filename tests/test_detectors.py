@@ -440,3 +440,19 @@ def test_a_carried_object_may_touch_the_table_only_while_being_placed(world: Wor
     _hold(world, placing, 0.5)
     assert placing.failure is None
     assert placing.phase == {"carried": ("left", "book"), "grasping": None, "placing": "book"}
+
+
+def test_a_new_phase_reclassifies_contacts_that_did_not_change(world: World) -> None:
+    """The same jaws on the same book, step after step: allowed while carrying, a collision at the
+    very next step once the phase no longer allows it (nothing about the contacts changed)."""
+    ctrl = _grasp_book_in_left_hand(world)
+    detector = FailureDetector(world)
+    detector.set_phase(carried=("left", "book"))
+    _hold(world, detector, 0.5, ctrl)
+    assert detector.failure is None
+    before = world.data.contact.geom.copy()
+    detector.set_phase()  # nobody holds it now
+    _hold(world, detector, world.model.opt.timestep, ctrl)  # one physics step
+    assert np.array_equal(world.data.contact.geom, before)  # the very same contact pairs
+    failure = detector.failure
+    assert failure is not None and failure.mode == "collision" and failure.bodies[1] == "book"

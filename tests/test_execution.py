@@ -115,3 +115,106 @@ def test_handover_of_an_object_whose_yaw_matters_does_not_plan() -> None:
     with pytest.raises(PlanningError, match="half turn") as info:
         transfer_steps(world, scenario.mission[0], "left_to_right")
     assert info.value.angle_error == pytest.approx(math.pi)
+
+
+# --- the servo loop of SimulatedRobot.advance -----------------------------------------------
+
+
+def test_servo_period_writes_joint_ctrl_bit_for_bit_at_every_physics_step() -> None:
+    """``advance`` prepares a control period at once; each step's ctrl must still be exactly
+    ``joint_ctrl`` of the ramped target with that step's ``qfrc_bias`` (the per-step formula)."""
+    import mujoco
+
+    from executive.execution import SimulatedRobot
+
+    world = build(load(SCENARIO))
+    robot = SimulatedRobot(world)
+    c, m, d = robot.controller, world.model, world.data
+    rng = np.random.default_rng(3)
+    q = world.home_qpos()
+    for moving in (True, False):
+        target = q.copy()
+        target[c.qpos_adr] += rng.normal(0.0, 0.05, len(c.qpos_adr))
+        qvel = np.zeros(m.nq)
+        qvel[c.qpos_adr] = rng.normal(0.0, 0.5, len(c.qpos_adr)) if moving else 0.0
+        leg_load = c.leg_load(target)
+        dt = m.opt.timestep
+        servo = c.period(target, leg_load, qvel if moving else None, robot.substeps, dt)
+        for k in range(robot.substeps):
+            expected = c.joint_ctrl(target + (k * dt) * qvel, d, leg_load, qvel if moving else None)
+            servo.write(k, d)
+            assert np.array_equal(d.ctrl[c.actuators], expected), (moving, k)
+            mujoco.mj_step(m, d)  # qfrc_bias changes from step to step
+
+
+def _stack_onto_left_hand(world: World) -> None:
+    """Move the (welded) book stack so that its box swallows the left hand site."""
+    import mujoco
+
+    m, d = world.model, world.data
+    geom = world.ids.obstacle_geoms["book_stack"]
+    body = int(m.geom_bodyid[geom])
+    m.body_pos[body] = d.site_xpos[world.ids.hand_sites["left"]] - m.geom_pos[geom]
+    mujoco.mj_kinematics(m, d)
+
+
+class _StackOnTheHandForOneStep:
+    """A detector wrapper that puts the stack on the left hand after the 4th physics step and back
+    after the 5th, so only the 5th step's contacts hold it; records what each check found."""
+
+    def __init__(self, world: World, *, latch: bool) -> None:
+        from executive.detectors import FailureDetector
+
+        self.inner = FailureDetector(world)
+        self.world, self.latch = world, latch
+        geom = world.ids.obstacle_geoms["book_stack"]
+        self.body = int(world.model.geom_bodyid[geom])
+        self.home = world.model.body_pos[self.body].copy()
+        self.seen: list[bool] = []
+
+    @property
+    def failure(self):  # type: ignore[no-untyped-def]
+        return self.inner.failure
+
+    def check(self):  # type: ignore[no-untyped-def]
+        found = self.inner.check()
+        self.seen.append(found is not None)
+        if len(self.seen) == 4:
+            _stack_onto_left_hand(self.world)
+        elif len(self.seen) == 5:
+            self.world.model.body_pos[self.body] = self.home
+        if not self.latch:
+            self.inner.acknowledge()
+            return None
+        return found
+
+
+def test_a_contact_that_lasts_one_physics_step_inside_a_control_period_is_caught() -> None:
+    """The detectors see every physics step, not only the end of each control period: a collision
+    present for a single 2 ms step in the middle of a 20 ms period is reported, at that step,
+    and the robot holds from there."""
+    from executive.detectors import FailureDetector
+    from executive.execution import SimulatedRobot
+
+    world = build(load(SCENARIO))
+    dt = world.model.opt.timestep
+    # Reference: the disturbance really is one step long (no latching, the period runs on), and
+    # the state at the end of the period shows no contact with the stack.
+    probe = _StackOnTheHandForOneStep(world, latch=False)
+    robot = SimulatedRobot(world, detector=probe)  # type: ignore[arg-type]
+    assert robot.substeps == 10
+    robot.advance()
+    assert probe.seen == [False] * 4 + [True] + [False] * 5
+    assert FailureDetector(world).check() is None
+
+    world = build(load(SCENARIO))
+    watched = _StackOnTheHandForOneStep(world, latch=True)
+    robot = SimulatedRobot(world, detector=watched)  # type: ignore[arg-type]
+    t0 = robot.time
+    failure = robot.advance()
+    print(failure)
+    assert failure is not None and failure.mode == "collision", failure
+    assert "book_stack" in failure.bodies
+    assert failure.time == pytest.approx(t0 + 5 * dt)  # the 5th step saw the contact
+    assert robot.stats.physics_steps == 5  # and the period stopped there
+    assert not np.any(robot.qvel_target)  # holding where it was
