@@ -72,14 +72,28 @@ class RiskGuard(py_trees.decorators.Decorator):
     def _monitor(self) -> Any:
         return self.bb.get(LIVE_RISK_KEY) if self.bb.exists(LIVE_RISK_KEY) else None
 
+    def allow(self, monitor: Any) -> frozenset[tuple[str, str]]:
+        """The pairs this motion may bring into contact (the monitor's collision model names them)."""
+        return frozenset(
+            monitor.collision.step_allow(
+                self.side, self.kind, self.obj, self.allow_contact, self.motion.trajectory.carried
+            )
+        )
+
+    def prepare(self, monitor: Any) -> None:
+        """Let ``monitor`` compute the planned knots' distances ahead (e.g. in a planning thread),
+        so the ticks only compute the measured configuration's."""
+        prepare = getattr(monitor, "prepare", None)
+        if callable(prepare):
+            traj = self.motion.trajectory
+            prepare(traj.qpos, carried=traj.carried[1] if traj.carried else None, allow=self.allow(monitor))
+
     def initialise(self) -> None:
         self._ticks = 0
         self.tripped = None
         monitor = self._monitor()
         if monitor is not None:
-            self._allow = monitor.collision.step_allow(
-                self.side, self.kind, self.obj, self.allow_contact, self.motion.trajectory.carried
-            )
+            self._allow = self.allow(monitor)
 
     def update(self) -> Status:
         status = self.decorated.status

@@ -14,25 +14,132 @@ Two quantities, each against a limit of ``risk.guard`` (:class:`GuardConfig`):
 The allowances are the planner's and the risk model's (a hand may touch the object
 it grasps; a carried object its support while lifted or placed), so a planned
 contact does not trip the guard.
+
+Cost per tick
+-------------
+The distance at the measured configuration is computed on every check. A planned
+knot's distance is a function of the knot (its full qpos, objects included), the
+carried object, the allowances and the estimate's geometry only, so it is
+memoised per planned trajectory, and dropped as a whole when the estimate's
+geometry changes (``body_pos``, ``body_quat``, ``geom_pos``, ``geom_quat``,
+``geom_size`` of the model, compared on every check). A moved obstacle therefore
+reaches every look-ahead knot on the very next check. :meth:`LiveRiskMonitor.prepare`
+fills the memo for a whole trajectory ahead of time (the selector calls it in its
+planning thread), so a tick only computes the measured configuration's distance.
+The CoM margin picks the foot contacts out in one pass (:func:`contact_support_margin`);
+a CoM clearly inside the support is measured without building the hull
+(:func:`interior_margin`, exact), anything else by the fall model's hull and margin
+(:mod:`executive.polygon`).
 """
 
 from __future__ import annotations
 
+import math
+import threading
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from executive.polygon import signed_margin
+from executive.polygon import convex_hull, signed_margin
 from executive.risk.collision import CollisionModel
-from executive.risk.fall import support_polygon
 from executive.scenario_types import GuardConfig
 from executive.world import World
 
-__all__ = ["GuardVerdict", "LiveRiskMonitor"]
+__all__ = ["GuardVerdict", "LiveRiskMonitor", "contact_support_margin", "interior_margin"]
 
 FloatArray = NDArray[np.float64]
+_TRACK_LIMIT = 512  # trajectories memoised; beyond, the memo starts afresh
+
+
+class _Track:
+    """Memoised distances of one planned trajectory's knots (NaN: not computed yet).
+
+    Keeps a reference to the knots, so their ``id`` (the memo's key) stays theirs while the
+    track lives. A planned trajectory is never edited in place (the planner returns new
+    arrays), so its knots' distances change only with the estimate's geometry.
+    """
+
+    def __init__(self, qpos: FloatArray) -> None:
+        self.qpos = qpos
+        self.dist = np.full(len(qpos), np.nan)
+        self.names: list[tuple[str, str]] = [("", "")] * len(qpos)
+
+
+_PAIRS: dict[int, FloatArray] = {}  # n -> the difference matrix of all ordered pairs i != j
+_TURN = np.array([[0.0, -1.0], [1.0, 0.0]])  # (x, y) @ _TURN = (y, -x): a quarter turn clockwise
+_CLEARLY_INSIDE = 1e-9  # m; the hull's own vertex tolerance (1e-12 x extent) is far below
+
+
+def interior_margin(points: FloatArray, x: FloatArray) -> float | None:
+    """Distance from ``x`` to the boundary of the convex hull of ``points`` (V, 2) when ``x`` is
+    clearly inside it; None otherwise (outside, on the boundary, or no polygon).
+
+    For ``x`` inside a convex polygon the distance is the least slack over its edges' outward
+    unit normals ``n``: ``max_k n . (p_k - x)``. Any unit direction ``u`` gives at least that
+    distance (the disc around ``x`` of that radius lies inside the polygon), and each hull edge
+    joins two of the points, so the least over the normals of all ordered point pairs is that
+    distance exactly, without building the hull. Collinear points give no positive value and
+    return None. The caller then asks :mod:`executive.polygon`, whose hull tolerance decides
+    those cases (it moves the boundary by at most 1e-12 x the points' extent, so where this
+    returns a value the two agree to that).
+    """
+    n = len(points)
+    diff = _PAIRS.get(n)
+    if diff is None:  # (n (n-1), n): row (i, j) picks p_j - p_i
+        i, j = np.nonzero(~np.eye(n, dtype=bool))
+        diff = np.zeros((len(i), n))
+        diff[np.arange(len(i)), j] = 1.0
+        diff[np.arange(len(i)), i] = -1.0
+        _PAIRS[n] = diff
+    normal = diff @ (points @ _TURN)  # (e_y, -e_x) of every pair's edge e, not normalised
+    length = np.hypot(normal[:, 0], normal[:, 1])
+    slack = (normal @ (points - x).T).max(axis=1)
+    repeated = length == 0.0  # a point given twice: no direction, no bound
+    if repeated.any():
+        length[repeated], slack[repeated] = 1.0, np.inf
+    slack /= length
+    margin = float(slack.min()) if slack.size else 0.0
+    return margin if margin > _CLEARLY_INSIDE else None
+
+
+def contact_support_margin(
+    world: World, data: mujoco.MjData, feet: frozenset[int] | None = None
+) -> float | None:
+    """CoM margin in the polygon of the feet's physics contacts with the floor (None: no polygon).
+
+    The polygon of ``support_polygon(world, data, from_contacts=True)``
+    (:mod:`executive.risk.fall`): contacts of a foot geom with the floor, or with any
+    non-robot geom when the world has no floor; the CoM is ``data.subtree_com`` of the base
+    body; the margin that of :func:`executive.polygon.signed_margin`. The contacts are picked
+    out in one pass; a CoM clearly inside (the standing robot, every tick) is measured by
+    :func:`interior_margin` without building the hull; anything else (outside, on the edge, no
+    polygon) by :func:`executive.polygon.convex_hull` and ``signed_margin`` themselves.
+    """
+    if feet is None:
+        feet = frozenset(g for geoms in world.ids.foot_geoms.values() for g in geoms)
+    floor = world.ids.floor_geom
+    robot = world.ids.robot_geoms
+    rows = []
+    if data.ncon:
+        for i, (g1, g2) in enumerate(data.contact.geom.tolist()):
+            other = g2 if g1 in feet else g1 if g2 in feet else None
+            if other is None or (other != floor if floor >= 0 else other in robot):
+                continue
+            rows.append(i)
+    if len(rows) < 3:
+        return None
+    points = data.contact.pos[rows, :2]
+    com = data.subtree_com[world.ids.base_body][:2]
+    if math.isfinite(float(points.sum()) + float(com.sum())):  # any inf or NaN: the slow path
+        inside = interior_margin(points, com)
+        if inside is not None:
+            return inside
+    try:
+        return float(signed_margin(convex_hull(points), com))
+    except ValueError:  # no polygon (collinear points), or a broken state the detectors report
+        return None
 
 
 @dataclass(frozen=True)
@@ -62,7 +169,8 @@ class GuardVerdict:
 class LiveRiskMonitor:
     """Guard checks on the estimate world (its obstacle and object poses are the current estimate).
 
-    Not thread-safe (one collision model, one ``MjData``); the guards call it from the tick.
+    Thread-safe: one lock serialises the collision model (one ``MjData``) between the guards'
+    checks in the tick and :meth:`prepare` in a planning thread.
     """
 
     def __init__(
@@ -74,6 +182,55 @@ class LiveRiskMonitor:
         self._object_qpos = [
             np.arange(adr, adr + 7) for adr in estimate.ids.object_qpos.values()
         ]  # free joints: 3 position + 4 quaternion
+        self._feet: dict[int, tuple[World, frozenset[int]]] = {}  # id(world) -> its foot geoms
+        self._lock = threading.RLock()
+        self._tracks: dict[tuple[int, str | None, frozenset[tuple[str, str]]], _Track] = {}
+        self._geometry = self._geometry_key()
+        self.knots_computed = 0  # planned knots whose distance was computed (not memoised)
+
+    def _geometry_key(self) -> bytes:
+        """What a knot's distance depends on besides the knot: the estimate's geometry."""
+        m = self.collision.model
+        return b"".join(a.tobytes() for a in (m.body_pos, m.body_quat, m.geom_pos, m.geom_quat, m.geom_size))
+
+    def _refresh(self) -> None:
+        """Forget the memoised knots when the estimate's geometry changed (caller holds the lock)."""
+        key = self._geometry_key()
+        if key != self._geometry or len(self._tracks) > _TRACK_LIMIT:
+            self._tracks.clear()
+            self._geometry = key
+
+    def _track(self, qpos: FloatArray, carried: str | None, allow: frozenset[tuple[str, str]]) -> _Track:
+        """The memo of a planned trajectory (caller holds the lock and has refreshed)."""
+        key = (id(qpos), carried, allow)
+        track = self._tracks.get(key)
+        if track is None or track.qpos is not qpos:
+            track = self._tracks[key] = _Track(qpos)
+        return track
+
+    def _fill(
+        self, track: _Track, lo: int, hi: int, carried: str | None, allow: frozenset[tuple[str, str]]
+    ) -> None:
+        """Compute the knots in [lo, hi) not computed yet (caller holds the lock)."""
+        for k in np.flatnonzero(np.isnan(track.dist[lo:hi])).tolist():
+            knot = self.collision.knot(track.qpos[lo + k], carried=carried, allow=allow)
+            track.dist[lo + k] = knot.distance
+            track.names[lo + k] = (knot.robot_body_name, knot.env_body_name)
+            self.knots_computed += 1
+
+    def prepare(
+        self, trajectory_qpos: FloatArray, *, carried: str | None, allow: frozenset[tuple[str, str]]
+    ) -> None:
+        """Compute (and memoise) every knot of a planned trajectory now, e.g. in a planning thread.
+
+        Pass the very array the guard will check (its identity keys the memo). Holds the lock
+        one knot at a time, so a guard's check in the tick waits at most one knot's distance.
+        """
+        qpos = np.asarray(trajectory_qpos, dtype=float)
+        for k in range(len(qpos)):
+            with self._lock:
+                self._refresh()
+                self._fill(self._track(qpos, carried, allow), k, k + 1, carried, allow)
 
     def configuration(self, measured_qpos: FloatArray, planned_qpos: FloatArray) -> FloatArray:
         """The robot where it is measured, the objects where the plan has them (the estimate)."""
@@ -94,15 +251,21 @@ class LiveRiskMonitor:
     ) -> tuple[float, float, str, str]:
         """Least distance now and at the planned knots in (t, t + lookahead]: (d, time, robot, env)."""
         times = np.asarray(trajectory_times, dtype=float)
-        k_now = int(np.clip(np.searchsorted(times, t), 0, len(times) - 1))
-        now = self.configuration(measured_qpos, trajectory_qpos[k_now])
-        best = self.collision.knot(now, carried=carried, allow=allow)
-        out = (best.distance, t, best.robot_body_name, best.env_body_name)
-        ahead = np.nonzero((times > t) & (times <= t + self.config.lookahead_s))[0]
-        for k in ahead:
-            knot = self.collision.knot(trajectory_qpos[k], carried=carried, allow=allow)
-            if knot.distance < out[0]:
-                out = (knot.distance, float(times[k]), knot.robot_body_name, knot.env_body_name)
+        qpos = np.asarray(trajectory_qpos, dtype=float)
+        k_now = min(max(int(np.searchsorted(times, t)), 0), len(times) - 1)
+        now = self.configuration(measured_qpos, qpos[k_now])
+        with self._lock:
+            self._refresh()
+            best = self.collision.knot(now, carried=carried, allow=allow)
+            out = (best.distance, t, best.robot_body_name, best.env_body_name)
+            lo = int(np.searchsorted(times, t, side="right"))
+            hi = int(np.searchsorted(times, t + self.config.lookahead_s, side="right"))
+            if hi > lo:
+                track = self._track(qpos, carried, allow)
+                self._fill(track, lo, hi, carried, allow)
+                k = lo + int(np.argmin(track.dist[lo:hi]))  # the first of equal minima, as a scan
+                if track.dist[k] < out[0]:
+                    out = (float(track.dist[k]), float(times[k]), *track.names[k])
         return out
 
     def com_margin(self, world: World, data: mujoco.MjData) -> float | None:
@@ -110,11 +273,11 @@ class LiveRiskMonitor:
 
         ``data`` must hold a stepped (or ``mj_forward``-ed) state: contacts and ``subtree_com``.
         """
-        try:
-            polygon = support_polygon(world, data, from_contacts=True)
-        except ValueError:
-            return None
-        return float(signed_margin(polygon, data.subtree_com[world.ids.base_body][:2]))
+        cached = self._feet.get(id(world))
+        if cached is None or cached[0] is not world:
+            feet = frozenset(g for geoms in world.ids.foot_geoms.values() for g in geoms)
+            cached = self._feet[id(world)] = (world, feet)
+        return contact_support_margin(world, data, cached[1])
 
     def check(
         self,

@@ -17,6 +17,12 @@ so ticks keep returning RUNNING (the robot holds) while it plans. It then:
    A fall or unstable simulation ends the task at once: nothing is re-tried on a
    robot that may not be standing.
 
+The worker thread does all the heavy work of a decision: it plans and assesses,
+builds every feasible alternative's subtree (and runs its ``setup``), and lets the
+live risk monitor (``/executive/live_risk``, if any) compute the guarded motions'
+planned distances of the lowest-risk alternative. The tick that sees the planning
+done only logs, ranks and swaps the ready subtrees in.
+
 Every step is a line in the audit log (:class:`executive.audit.AuditLog`) before
 it is acted on; no alternative above the threshold starts without an approval
 line naming it (checked in :meth:`RiskSelector._start`).
@@ -33,6 +39,7 @@ import mujoco
 import numpy as np
 import py_trees
 
+from behaviours.guard import LIVE_RISK_KEY, RiskGuard
 from behaviours.robot_access import NAMESPACE
 from executive.approval import AlternativeRisk as RequestRow
 from executive.approval import ApprovalChannel, ApprovalDecision, ApprovalRequest, PendingApproval
@@ -49,6 +56,9 @@ __all__ = ["RiskSelector", "task_label"]
 
 Status = py_trees.common.Status
 FloatArray = np.ndarray
+#: What the planning thread hands the tick: every alternative's assessment, and the ready
+#: (set up) subtrees of the feasible ones by name.
+Planned = tuple[list[AlternativeRisk], dict[str, py_trees.behaviour.Behaviour]]
 
 #: Failure modes after which nothing is re-tried.
 TERMINAL_MODES = ("fall", "unstable")
@@ -128,12 +138,13 @@ class RiskSelector(py_trees.composites.Composite):
         self._planner: Planner | None = None
         self._collision: CollisionModel | None = None
         self._pool: concurrent.futures.ThreadPoolExecutor | None = None
-        self._future: concurrent.futures.Future[list[AlternativeRisk]] | None = None
+        self._future: concurrent.futures.Future[Planned] | None = None
         self._approved: set[str] = set()
         self._by_name: dict[str, py_trees.behaviour.Behaviour] = {}
         self.bb = self.attach_blackboard_client(name=name, namespace=NAMESPACE)
         self.bb.register_key("robot", access=py_trees.common.Access.READ)
         self.bb.register_key("holding", access=py_trees.common.Access.WRITE)
+        self.bb.register_key(LIVE_RISK_KEY, access=py_trees.common.Access.READ)
 
     def measured_state(self) -> tuple[FloatArray, dict[str, tuple[FloatArray, FloatArray]]]:
         robot = self.bb.robot
@@ -206,16 +217,19 @@ class RiskSelector(py_trees.composites.Composite):
         )
         self.phase = "planning"
 
-        def work() -> list[AlternativeRisk]:
+        monitor = self.bb.get(LIVE_RISK_KEY) if self.guard and self.bb.exists(LIVE_RISK_KEY) else None
+
+        def work() -> Planned:
             assert self._planner is not None and self._collision is not None
-            return assess_task(self.estimate, task, self._planner, self._collision, q_start=q)
+            results = assess_task(self.estimate, task, self._planner, self._collision, q_start=q)
+            return results, self._subtrees(results, monitor)
 
         if self.background:
             if self._pool is None:
                 self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix=f"plan-{self.name}")
             self._future = self._pool.submit(work)
         else:
-            future: concurrent.futures.Future[list[AlternativeRisk]] = concurrent.futures.Future()
+            future: concurrent.futures.Future[Planned] = concurrent.futures.Future()
             try:
                 future.set_result(work())
             except Exception as exc:
@@ -245,13 +259,13 @@ class RiskSelector(py_trees.composites.Composite):
                 self.feedback_message = f"planning {self.name}"
                 return Status.RUNNING
             try:
-                results = self._future.result()
+                results, subtrees = self._future.result()
             except ExecutiveError as exc:
                 return self._finish("failed", {"mode": "planning", "detail": str(exc)})
             except Exception as exc:  # a defect in planning must still end in the log
                 detail = f"planning raised {type(exc).__name__}: {exc} (a defect: please report it)"
                 return self._finish("failed", {"mode": "planning", "detail": detail})
-            return self._decide(results)
+            return self._decide(results, subtrees)
         if self.phase == "awaiting_approval":
             assert self.pending is not None
             decision = self.pending.decision
@@ -263,16 +277,15 @@ class RiskSelector(py_trees.composites.Composite):
             return None
         raise ExecutiveError(f"{self.name}: tick in phase '{self.phase}'")
 
-    def _decide(self, results: Sequence[AlternativeRisk]) -> Status | None:
+    def _decide(
+        self, results: Sequence[AlternativeRisk], subtrees: dict[str, py_trees.behaviour.Behaviour]
+    ) -> Status | None:
         for alt in results:
             self.log.record("plan", task=self.name, **risk_row(alt, self.ordering))
-        feasible = sorted(
-            (a for a in results if a.risk is not None),
-            key=lambda a: a.risk.value(self.ordering) if a.risk else 0.0,
-        )
+        feasible = self._ranked(results)
         self.ranking = feasible
         self.results = list(results)
-        self._build_children(feasible)
+        self._swap_children(feasible, subtrees)
         if not feasible:
             reasons = "; ".join(f"{a.name}: {a.error}" for a in results) or "no alternatives left"
             self.log.record(
@@ -340,14 +353,43 @@ class RiskSelector(py_trees.composites.Composite):
             return Status.RUNNING
         return self._finish("aborted", {"mode": "aborted", "detail": f"aborted by {decision.by}"})
 
-    def _build_children(self, ranked: Sequence[AlternativeRisk]) -> None:
+    def _ranked(self, results: Sequence[AlternativeRisk]) -> list[AlternativeRisk]:
+        """The feasible alternatives, lowest ordering value first."""
+        return sorted(
+            (a for a in results if a.risk is not None),
+            key=lambda a: a.risk.value(self.ordering) if a.risk else 0.0,
+        )
+
+    def _subtrees(
+        self, results: Sequence[AlternativeRisk], monitor: Any
+    ) -> dict[str, py_trees.behaviour.Behaviour]:
+        """Build and set up the feasible alternatives' subtrees (runs in the planning thread).
+
+        With a live risk ``monitor``, the lowest-risk alternative's guarded motions have
+        their planned distances computed now (:meth:`behaviours.guard.RiskGuard.prepare`);
+        any other alternative's guards compute theirs as they run.
+        """
+        subtrees: dict[str, py_trees.behaviour.Behaviour] = {}
+        for i, alt in enumerate(self._ranked(results)):
+            assert alt.plan is not None
+            subtree = build_subtree(alt.plan, guard=self.guard)
+            subtree.setup_with_descendants()
+            if monitor is not None and i == 0:
+                for node in subtree.iterate():
+                    if isinstance(node, RiskGuard):
+                        node.prepare(monitor)
+            subtrees[alt.name] = subtree
+        return subtrees
+
+    def _swap_children(
+        self, ranked: Sequence[AlternativeRisk], subtrees: dict[str, py_trees.behaviour.Behaviour]
+    ) -> None:
+        """Make the ready subtrees the children, lowest risk first (nothing built in the tick)."""
         for child in list(self.children):
             self.remove_child(child)
         self._by_name = {}
         for alt in ranked:
-            assert alt.plan is not None
-            subtree = build_subtree(alt.plan, guard=self.guard)
-            subtree.setup_with_descendants()
+            subtree = subtrees[alt.name]
             self.add_child(subtree)
             self._by_name[alt.name] = subtree
 

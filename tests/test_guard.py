@@ -130,3 +130,122 @@ def test_guard_stays_quiet_on_an_undisturbed_run(plan: AlternativePlan) -> None:
     assert root.status == Status.SUCCESS
     assert least >= scenario.risk.guard.min_distance
     assert min(margins) >= scenario.risk.guard.min_com_margin
+
+
+# --- the cost of a live check: memoised planned knots, the CoM margin in plain floats ---------
+
+
+def _window_reference(
+    estimate: World, traj: object, measured: np.ndarray, t: float, allow: frozenset[tuple[str, str]]
+) -> float:
+    """The least distance now and over the look-ahead, every knot computed afresh by a new
+    collision model of the estimate as it is now (no memo anywhere)."""
+    from executive.risk.collision import CollisionModel
+
+    model = CollisionModel(estimate, estimate.scenario.risk)
+    times, qpos = traj.times, traj.qpos  # type: ignore[attr-defined]
+    carried = traj.carried[1] if traj.carried else None  # type: ignore[attr-defined]
+    lookahead = estimate.scenario.risk.guard.lookahead_s
+    k_now = min(int(np.searchsorted(times, t)), len(times) - 1)
+    now = measured.copy()
+    for adr in estimate.ids.object_qpos.values():
+        now[adr : adr + 7] = qpos[k_now][adr : adr + 7]
+    best = model.knot(now, carried=carried, allow=allow).distance
+    for k in np.nonzero((times > t) & (times <= t + lookahead))[0]:
+        best = min(best, model.knot(qpos[k], carried=carried, allow=allow).distance)
+    return float(best)
+
+
+def test_memoised_look_ahead_equals_a_fresh_computation_and_follows_a_moved_obstacle(
+    plan: AlternativePlan,
+) -> None:
+    scenario = load("book_transfer")
+    estimate = build(scenario)
+    monitor = LiveRiskMonitor(estimate, scenario.risk.guard)
+    traj = plan.trajectories["left.transfer"]
+    carried = traj.carried[1] if traj.carried else None
+    allow = monitor.collision.step_allow("left", "carry", "book", (), traj.carried)
+    monitor.prepare(traj.qpos, carried=carried, allow=allow)
+    prepared = monitor.knots_computed
+    assert prepared == len(traj.times)
+    rng = np.random.default_rng(0)
+    for t in np.linspace(0.0, traj.duration, 7):
+        measured = traj.sample(t)
+        measured[7:] += rng.normal(0.0, 0.01, len(measured) - 7)  # tracking error of the joints
+        d = monitor.clearance(measured, traj.qpos, traj.times, t, carried=carried, allow=allow)[0]
+        assert d == pytest.approx(_window_reference(estimate, traj, measured, t, allow), abs=1e-9)
+    assert monitor.knots_computed == prepared  # the look-ahead came from the memo
+    # The estimate changes: the stack slides into the carry lane. The next check sees it.
+    t = 0.5 * traj.duration
+    measured = traj.sample(t)
+    before = monitor.clearance(measured, traj.qpos, traj.times, t, carried=carried, allow=allow)[0]
+    _move_stack(estimate, SHIFT)
+    d, _, _, env = monitor.clearance(measured, traj.qpos, traj.times, t, carried=carried, allow=allow)
+    assert monitor.knots_computed > prepared  # recomputed against the moved stack
+    assert d == pytest.approx(_window_reference(estimate, traj, measured, t, allow), abs=1e-9)
+    print(f"look-ahead clearance {before * 1000:.1f} mm, {d * 1000:.1f} mm to {env} after the move")
+    assert env == "book_stack" and d < before
+
+
+def test_interior_margin_equals_the_polygon_modules_margin() -> None:
+    """Without building the hull, the same margin as ``signed_margin(convex_hull(...))`` wherever
+    it answers, and it answers for every point clearly inside; random point sets, repeated
+    points, collinear sets, and ulp-jittered rectangles (two soles' contact corners)."""
+    from executive.live_risk import interior_margin
+    from executive.polygon import convex_hull, signed_margin
+
+    rng = np.random.default_rng(7)
+    answered = inside = 0
+    sets = []
+    for n in (3, 4, 8, 16):
+        for _ in range(80):
+            pts = rng.uniform(-0.2, 0.2, (n, 2))
+            if rng.random() < 0.3:
+                pts = np.vstack([pts, pts[:2]])
+            sets.append(pts)
+    soles = np.array([[x, y] for x in (-0.126, 0.134) for y in (-0.21, -0.06, 0.06, 0.21)])
+    for _ in range(80):
+        sets.append(soles * (1.0 + rng.normal(0.0, 1e-15, soles.shape)))
+    sets.append(np.column_stack([np.linspace(0, 1, 6), 0.5 * np.linspace(0, 1, 6)]))  # collinear
+    for pts in sets:
+        hull = convex_hull(pts)
+        for x in rng.uniform(-0.3, 0.3, (5, 2)):
+            got = interior_margin(pts, x)
+            reference = signed_margin(hull, x) if len(hull) >= 3 else None
+            if got is not None:
+                answered += 1
+                assert reference is not None and got == pytest.approx(reference, abs=1e-12)
+            if reference is not None and reference > 1e-8:
+                inside += 1
+                assert got is not None
+    print(f"{answered} margins answered, {inside} points clearly inside")
+    assert answered > 300
+
+
+def test_com_margin_equals_the_fall_models_polygon_on_real_contacts() -> None:
+    """The guard's CoM margin against ``support_polygon`` of the fall model, on the contacts of a
+    robot that leans forward until its support breaks up (then both say: no polygon)."""
+    from executive.polygon import signed_margin
+    from executive.risk.fall import support_polygon
+
+    scenario = load("book_transfer")
+    truth, estimate = build(scenario), build(scenario)
+    monitor = LiveRiskMonitor(estimate, scenario.risk.guard)
+    robot = SimulatedRobot(truth)
+    target = truth.home_qpos()
+    target[truth.model.jnt_qposadr[truth.model.joint("waist_pitch").id]] += 0.3  # lean forward
+    robot.set_joint_targets(target)
+    margins, none = 0, 0
+    for _ in range(40):
+        robot.advance()
+        try:
+            polygon = support_polygon(truth, truth.data, from_contacts=True)
+        except ValueError:
+            assert monitor.com_margin(truth, truth.data) is None
+            none += 1
+            continue
+        reference = signed_margin(polygon, truth.data.subtree_com[truth.ids.base_body][:2])
+        assert monitor.com_margin(truth, truth.data) == pytest.approx(reference, abs=1e-12)
+        margins += 1
+    print(f"{margins} margins compared, {none} states without a polygon")
+    assert margins >= 3

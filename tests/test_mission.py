@@ -202,3 +202,38 @@ def test_a_killed_run_leaves_only_complete_json_lines(tmp_path: Path) -> None:
     print(f"killed after {len(entries)} lines: {kinds}")
     assert "execute" in kinds and "end" not in kinds
     assert not (out / "summary.json").exists()
+
+
+@pytest.mark.slow
+def test_the_tick_that_ends_planning_only_swaps_in_subtrees_built_by_the_worker(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Subtrees are built and set up in the planning thread, and the chosen alternative's guards
+    have their planned knots computed there: the ticks compute none while it executes."""
+    import threading
+
+    import executive.selector as selector_module
+
+    built_in: list[str] = []
+    real = selector_module.build_subtree
+
+    def spy(plan: Any, **kwargs: Any) -> Any:
+        built_in.append(threading.current_thread().name)
+        return real(plan, **kwargs)
+
+    monkeypatch.setattr(selector_module, "build_subtree", spy)
+    executive = Executive("book_transfer", approval="auto", truth="exact")
+    monitor = executive.monitor
+    assert monitor is not None
+    selector = executive.selectors[0]
+    while not executive.done and selector.phase != "executing":
+        executive.tick()
+    assert len(built_in) == len(selector.ranking) and threading.current_thread().name not in built_in
+    assert [child.name for child in selector.children] == [a.name for a in selector.ranking]
+    prepared = monitor.knots_computed
+    assert prepared > 0
+    for _ in range(250):  # 5 s of the chosen alternative, its guards checking every tick
+        executive.tick()
+    assert selector.phase == "executing" and selector.chosen == selector.ranking[0].name
+    assert monitor.knots_computed == prepared
+    executive.stop("test over")
