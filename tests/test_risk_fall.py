@@ -414,3 +414,44 @@ def test_convex_hull_of_rotated_jittered_soles_matches_qhull(yaw: float, ulps: l
     hull = convex_hull(pts)
     assert len(hull) == 4  # the outer rectangle of the two soles
     _check_hull_against_scipy(pts, hull)
+
+
+def test_batched_knot_evaluation_matches_the_per_knot_functions() -> None:
+    """fall_batch evaluates many knots at once; each number must be the per-knot function's."""
+    from executive.risk.fall_batch import (
+        edge_probabilities_batch,
+        hulls,
+        probability_outside_batch,
+        signed_margin_batch,
+    )
+
+    rng = np.random.default_rng(3)
+    # Soles drifting by rounding-sized and millimetre-sized amounts, one knot with a lifted foot.
+    base = np.array([[x, y] for x in (-0.126, 0.134) for y in (0.06, 0.21, -0.21, -0.06)])
+    count = 40
+    points = base[None] + rng.normal(0.0, 1e-15, (count, 8, 2))
+    points[20:] += rng.normal(0.0, 2e-3, (count - 20, 8, 2))
+    on_ground = np.ones((count, 8), dtype=bool)
+    on_ground[30, :4] = False  # the first foot lifted: a 4-point polygon
+    polys = hulls(points, on_ground)
+    cov = np.array([[4e-4, 1e-4], [1e-4, 2e-4]])
+    means = rng.normal(0.0, 0.08, (count, 2))
+    means[5] = [0.5, 0.0]  # outside
+    for k in range(count):
+        ref = convex_hull(points[k][on_ground[k]])
+        got = polys.polygon(k)
+        assert polygon_area(got) == pytest.approx(polygon_area(ref), rel=1e-12)
+        a, b = halfplanes(got)
+        assert float(np.max(points[k][on_ground[k]] @ a.T - b)) <= 1e-12
+    for knots, verts in polys.groups.values():
+        mu = means[knots]
+        margins = signed_margin_batch(verts, mu)
+        p_edges = edge_probabilities_batch(verts, mu, cov)
+        p_out = probability_outside_batch(verts, mu, cov)
+        for j in range(len(knots)):
+            assert margins[j] == pytest.approx(signed_margin(verts[j], mu[j]), abs=1e-15)
+            np.testing.assert_allclose(p_edges[j], edge_probabilities(verts[j], mu[j], cov), rtol=1e-12)
+            assert p_out[j] == pytest.approx(probability_outside(verts[j], mu[j], cov), rel=1e-11, abs=1e-15)
+    np.testing.assert_array_equal(
+        probability_outside_batch(RECT[None], np.array([[0.3, 0.0]]), np.zeros((2, 2))), [1.0]
+    )

@@ -29,7 +29,6 @@ edges of S).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Literal
 
 import mujoco
@@ -45,6 +44,13 @@ from executive.polygon import (
     halfplanes,
     polygon_area,
     signed_margin,
+)
+from executive.risk.fall_batch import (
+    edge_probabilities_batch,
+    halfplanes_batch,
+    hulls,
+    probability_outside_batch,
+    signed_margin_batch,
 )
 from executive.risk.gaussian import McEstimate, normal_cdf, union_bounds
 from executive.risk.report import RiskReport
@@ -338,23 +344,42 @@ def support_polygon(
 # --- trajectory assessment --------------------------------------------------------------------
 
 
-@dataclass(frozen=True)
-class _FallKnot:
-    """One knot's fall facts (what assess_fall records per knot)."""
-
-    time: float
-    com: FloatArray  # (3,)
-    polygon: FloatArray  # (V, 2)
-    margin: float
-    seed_risk: float
-    probability: float
-    lower: float
-    upper: float
-    capture_margin: float
-
-
 def _com_covariance(uncertainty: Uncertainty) -> FloatArray:
     return (uncertainty.com**2) * np.eye(2)
+
+
+def _intersect_halfplanes(safe: FloatArray, a: FloatArray, b: FloatArray) -> FloatArray | None:
+    """The convex polygon ``safe`` cut by every half-plane ``a_i . x <= b_i``; None once it is empty.
+
+    The most violated half-plane first, one clip at a time (Sutherland-Hodgman), until every
+    vertex satisfies every half-plane: the same intersection as clipping by all of them in turn,
+    without visiting the (many) half-planes that do not cut it.
+    """
+    done = np.zeros(len(b), dtype=bool)
+    while True:
+        excess = np.max(safe @ a.T, axis=0) - b
+        excess[done] = -np.inf
+        j = int(np.argmax(excess)) if len(b) else 0
+        if len(b) == 0 or excess[j] <= 0.0:
+            return safe
+        done[j] = True
+        safe = clip_polygon(safe, a[j], float(b[j]))
+        if len(safe) < 3 or polygon_area(safe) <= 0.0:
+            return None
+
+
+def _shifted_halfplanes(polygons: list[FloatArray], mus: FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Half-planes (A, b) of every polygon P_k - mu_k, stacked; polygons of one size at once."""
+    by_size: dict[int, list[int]] = {}
+    for k, poly in enumerate(polygons):
+        by_size.setdefault(len(poly), []).append(k)
+    a_parts, b_parts = [], []
+    for ks in by_size.values():
+        v = np.stack([check_polygon(polygons[k]) for k in ks])
+        a, b = halfplanes_batch(v)
+        a_parts.append(a.reshape(-1, 2))
+        b_parts.append((b - np.einsum("nij,nj->ni", a, mus[ks])).reshape(-1))
+    return np.concatenate(a_parts), np.concatenate(b_parts)
 
 
 def persistent_bias_probability(
@@ -369,15 +394,54 @@ def persistent_bias_probability(
     mus = np.asarray(means, dtype=float).reshape(len(polygons), -1)[:, :2]
     if len(polygons) == 0:
         raise ValueError("persistent_bias_probability: no polygons")
-    safe = check_polygon(polygons[0]) - mus[0]
-    for poly, mu in zip(polygons[1:], mus[1:], strict=True):
-        a, b = halfplanes(poly)
-        for ai, bi in zip(a, b - a @ mu, strict=True):
-            safe = clip_polygon(safe, ai, float(bi))
-            if len(safe) < 3 or polygon_area(safe) <= 0.0:
-                return 1.0, 1.0
+    safe: FloatArray | None = check_polygon(polygons[0]) - mus[0]
+    if len(polygons) > 1:
+        a, b = _shifted_halfplanes(polygons[1:], mus[1:])
+        safe = _intersect_halfplanes(np.asarray(safe), a, b)
+    if safe is None:
+        return 1.0, 1.0
     zero = np.zeros(2)
     return probability_outside(safe, zero, cov), union_bounds(edge_probabilities(safe, zero, cov))[1]
+
+
+def _foot_points_batch(world: World, xpos: FloatArray, xmat: FloatArray) -> FloatArray:
+    """:func:`_foot_points` for K knots at once: xpos (K, G, 3), xmat (K, G, 3, 3) of the foot geoms
+    (in ``world.ids.foot_geoms`` order); returns (K, P, 3) in the same point order."""
+    model = world.model
+    geoms = [g for gs in world.ids.foot_geoms.values() for g in gs]
+    parts = []
+    signs = np.array([[-1.0, -1.0], [-1.0, 1.0], [1.0, -1.0], [1.0, 1.0]])  # (s1, s2) as in the loop
+    for i, g in enumerate(geoms):
+        centre, rot = xpos[:, i], xmat[:, i]
+        if model.geom_type[g] != mujoco.mjtGeom.mjGEOM_BOX:
+            parts.append(centre[:, None, :])
+            continue
+        size = model.geom_size[g]
+        up = rot[:, 2, :]  # (K, 3): the world z row
+        k = np.argmax(np.abs(up), axis=1)  # local axis closest to the vertical
+        vert = up[np.arange(len(k)), k]
+        sign = np.where(vert != 0.0, -np.sign(vert), -1.0)
+        others = np.array([[1, 2], [0, 2], [0, 1]])[k]  # (K, 2), increasing
+        local = np.zeros((len(k), 4, 3))
+        rows = np.arange(len(k))
+        local[rows, :, k] = (sign * size[k])[:, None]
+        local[rows[:, None], np.arange(4)[None, :], others[:, 0:1]] = (
+            signs[None, :, 0] * size[others[:, 0]][:, None]
+        )
+        local[rows[:, None], np.arange(4)[None, :], others[:, 1:2]] = (
+            signs[None, :, 1] * size[others[:, 1]][:, None]
+        )
+        parts.append(centre[:, None, :] + np.einsum("kij,kcj->kci", rot, local))
+    return np.concatenate(parts, axis=1)
+
+
+def _seed_batch(margins: FloatArray, radius: float, exponent: float) -> FloatArray:
+    """:func:`seed_fall_risk` elementwise."""
+    seed_fall_risk(0.0, radius, exponent)  # validates radius and exponent
+    if radius == 0.0:
+        return np.where(margins >= 0.0, 0.0, 1.0)
+    risk = np.clip((radius - margins) / (2.0 * radius), 0.0, 1.0) ** exponent
+    return np.asarray(np.where(margins >= radius, 0.0, risk), dtype=float)
 
 
 def assess_fall(
@@ -388,7 +452,8 @@ def assess_fall(
     Per knot: the robot's CoM (recomputed with MuJoCo from the knot's qpos, robot bodies only),
     the support polygon from the foot geometry, the signed margin, the seed's circle risk, the
     exact and Boole probabilities that the true CoM (N(CoM, uncertainty.com^2 I)) is outside,
-    and the capture point's margin (finite-difference CoM velocity).
+    and the capture point's margin (finite-difference CoM velocity). The knots are evaluated
+    together (:mod:`executive.risk.fall_batch`); the numbers are those of the per-knot functions.
     """
     model = world.model
     times = np.asarray(trajectory.times, dtype=float)
@@ -400,53 +465,53 @@ def assess_fall(
         )
     cfg = risk_config.fall
     radius = cfg.circle_radius if cfg.circle_radius is not None else cfg.sigmas * uncertainty.com
-    cov = _com_covariance(uncertainty)
+    cov = _covariance(_com_covariance(uncertainty))
     data = mujoco.MjData(model)
     base = world.ids.base_body
     gravity = float(np.linalg.norm(model.opt.gravity))
 
     count = len(times)
+    feet = [g for gs in world.ids.foot_geoms.values() for g in gs]
     coms = np.zeros((count, 3))
-    polygons: list[FloatArray] = []
-    ground = 0.0
+    xpos = np.zeros((count, len(feet), 3))
+    xmat = np.zeros((count, len(feet), 9))
     for k in range(count):
         data.qpos[:] = qpos[k]
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
         coms[k] = data.subtree_com[base]
-        polygons.append(support_polygon(world, data, from_contacts=False))
-        ground = _ground_height(world, data)
-    velocity = np.gradient(coms, times, axis=0) if count >= 2 else np.zeros_like(coms)
-
-    knots: list[_FallKnot] = []
-    for k in range(count):
-        poly, mu = polygons[k], coms[k, :2]
-        margin = signed_margin(poly, mu)
-        lower, upper = union_bounds(edge_probabilities(poly, mu, cov))
-        xi = capture_point(coms[k], velocity[k], gravity, ground)
-        knots.append(
-            _FallKnot(
-                time=float(times[k]),
-                com=coms[k].copy(),
-                polygon=poly,
-                margin=margin,
-                seed_risk=seed_fall_risk(margin, radius, cfg.exponent),
-                probability=probability_outside(poly, mu, cov),
-                lower=lower,
-                upper=upper,
-                capture_margin=signed_margin(poly, xi),
-            )
+        xpos[k] = data.geom_xpos[feet]
+        xmat[k] = data.geom_xmat[feet]
+    ground = _ground_height(world, data)
+    points = _foot_points_batch(world, xpos, xmat.reshape(count, len(feet), 3, 3))
+    polygons = hulls(points[..., :2], points[..., 2] <= ground + 0.01)
+    velocity = np.asarray(np.gradient(coms, times, axis=0)) if count >= 2 else np.zeros_like(coms)
+    height = coms[:, 2] - ground
+    if gravity <= 0.0 or np.any(height <= 0.0):
+        raise ValueError(
+            f"capture_point: need g > 0 and the CoM above the ground, got g={gravity}, "
+            f"h={float(np.min(height))}"
         )
+    xi = coms[:, :2] + velocity[:, :2] / np.sqrt(gravity / height)[:, None]
 
-    per_knot = np.array([kn.probability for kn in knots])
-    probability, boole = persistent_bias_probability(polygons, coms, cov)
+    margins, capture, per_knot = np.zeros(count), np.zeros(count), np.zeros(count)
+    lower_k, upper_k = np.zeros(count), np.zeros(count)
+    for knots, verts in polygons.groups.values():
+        mu = coms[knots, :2]
+        margins[knots] = signed_margin_batch(verts, mu)
+        capture[knots] = signed_margin_batch(verts, xi[knots])
+        p = edge_probabilities_batch(verts, mu, cov)
+        lower_k[knots] = np.max(p, axis=1)
+        upper_k[knots] = np.minimum(1.0, np.sum(p, axis=1))
+        per_knot[knots] = probability_outside_batch(verts, mu, cov)
+    seed = _seed_batch(margins, radius, cfg.exponent)
+
+    polygon_list = [polygons.polygon(k) for k in range(count)]
+    probability, boole = persistent_bias_probability(polygon_list, coms, cov)
     worst = float(np.max(per_knot))
-    lower_bound = max(worst, max(kn.lower for kn in knots))
+    lower_bound = max(worst, float(np.max(lower_k)))
     probability = float(np.clip(probability, lower_bound, max(boole, lower_bound)))
 
-    margins = np.array([kn.margin for kn in knots])
-    capture = np.array([kn.capture_margin for kn in knots])
-    seed = np.array([kn.seed_risk for kn in knots])
     k_min, k_cap, k_worst = int(np.argmin(margins)), int(np.argmin(capture)), int(np.argmax(per_knot))
     mismatch = (
         float(np.max(np.linalg.norm(np.asarray(trajectory.com_path, dtype=float) - coms, axis=1)))
@@ -464,8 +529,8 @@ def assess_fall(
             "margin": margins,
             "seed_risk": seed,
             "probability": per_knot,
-            "probability_lower": np.array([kn.lower for kn in knots]),
-            "probability_upper": np.array([kn.upper for kn in knots]),
+            "probability_lower": lower_k,
+            "probability_upper": upper_k,
             "capture_margin": capture,
             "com_x": coms[:, 0].copy(),
             "com_y": coms[:, 1].copy(),
@@ -480,6 +545,6 @@ def assess_fall(
             "circle_radius": float(radius),
             "com_sigma": float(uncertainty.com),
             "com_path_mismatch": mismatch,
-            "support_area": polygon_area(polygons[k_min]),
+            "support_area": polygon_area(polygon_list[k_min]),
         },
     )
