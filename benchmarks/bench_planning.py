@@ -1,113 +1,148 @@
-"""Speed of the whole-body planner on the book_transfer scene.
+"""Speed of planning plus risk assessment of every alternative of book_transfer, on one core.
 
-Plans a typical 8-segment alternative (the left arm moves the book over the
-stack: pre-grasp, grasp, lift, carry, place, retreat, left hand home, both
-hands to the ready pose) several times and prints the mean IK step time,
-iterations and knots per segment, and the total planning time.
+Measures, in one run (issue #4, "Speed"):
 
+1. planning plus risk assessment of all alternatives of ``book_transfer``
+   (``executive.assessment.assess_task``, what ``executive plan`` does), target under 1 s;
+2. the cost of the risk evaluation per knot (collision profile, fall, grasp and their
+   combination, divided by the knots of the alternative's trajectories) against the cost of
+   raw ``mujoco.mj_kinematics`` plus raw ``coal.distance`` on exactly the pairs the collision
+   model's broad phase sent to coal at those knots, target within 3x.
+
+Prints the targets next to the measured values; does not assert.
 Run: ``python benchmarks/bench_planning.py [repeats]``
 """
 
 from __future__ import annotations
 
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # one core: no BLAS threads
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
 import sys
 import time
+from typing import Any
 
+import coal
 import mujoco
 import numpy as np
 
-from executive.planning import HandTarget, Planner, Trajectory, hand_top_down_quat
+from executive.assessment import AlternativeRisk, assess_plan, assess_task
+from executive.composition import AlternativePlan
+from executive.planning import Planner
+from executive.risk.collision import CollisionModel
+from executive.risk.shapes import coal_geometry, coal_transform
 from executive.scenario import load
 from executive.world import World, build
 
-__all__ = ["home_pose", "main", "plan_left_alternative"]
+__all__ = ["main"]
 
-GRASP_Z = 0.835
-
-
-def plan_left_alternative(planner: Planner, world: World) -> list[tuple[Trajectory, int, float, float]]:
-    """The 8 segments; per segment (trajectory, IK iterations, IK seconds, total seconds)."""
-    quat = hand_top_down_quat()
-    home = world.home_qpos()
-    ready = {side: home_pose(world, side) for side in ("left", "right")}
-    book, goal = np.array([0.48, 0.26]), np.array([0.48, -0.26])
-
-    def tgt(side: str, xy: np.ndarray, z: float) -> list[HandTarget]:
-        return [HandTarget(side, np.array([*xy, z]), quat)]
-
-    steps: list[tuple[str, list[HandTarget], dict[str, object]]] = [
-        ("left.pregrasp", tgt("left", book, GRASP_Z + 0.10), {}),
-        ("left.grasp", tgt("left", book, GRASP_Z), {"allow_contact": ("book",)}),
-        (
-            "left.lift",
-            tgt("left", book, GRASP_Z + 0.12),
-            {"carried": ("left", "book"), "allow_contact": ("book",)},
-        ),
-        ("left.carry", tgt("left", goal, 0.90), {"carried": ("left", "book")}),
-        (
-            "left.place",
-            tgt("left", goal, GRASP_Z),
-            {"carried": ("left", "book"), "allow_contact": ("table_top",)},
-        ),
-        ("left.retreat", tgt("left", goal, GRASP_Z + 0.10), {"allow_contact": ("book",)}),
-        ("left.home", [ready["left"]], {}),
-        ("both.ready", [ready["left"], ready["right"]], {}),
-    ]
-    out = []
-    q = home
-    for name, targets, kwargs in steps:
-        traj = planner.move(q, targets, name=name, **kwargs)  # type: ignore[arg-type]
-        stats = planner.last_stats
-        if stats is None:
-            raise RuntimeError("the planner recorded no statistics")
-        out.append((traj, stats.iterations, stats.ik_time_s, stats.total_time_s))
-        q = traj.qpos[-1]
-    return out
+TARGET_TOTAL_S = 1.0
+TARGET_PER_KNOT_RATIO = 3.0
 
 
-def home_pose(world: World, side: str) -> HandTarget:
-    """The hand site's pose at the keyframe."""
-    data = world.data
-    world.reset()
-    site = world.ids.hand_sites[side]
-    quat = np.empty(4)
-    mujoco.mju_mat2Quat(quat, data.site_xmat[site])
-    return HandTarget(side, data.site_xpos[site].copy(), quat)
+def _knots(plan: AlternativePlan) -> int:
+    return sum(len(t.times) for t in plan.trajectories.values())
 
 
-def main(argv: list[str]) -> None:
-    repeats = int(argv[1]) if len(argv) > 1 else 3
+def _record_pairs(model: CollisionModel, world: World, plan: AlternativePlan) -> list[tuple[Any, ...]]:
+    """(qpos, [(env geom, robot geom), ...]) per knot the collision model visited in assess_plan."""
+    record: list[tuple[Any, ...]] = []
+    knot, pair = model._knot_from_data, model._pair_distance
+
+    def knot_spy(data: mujoco.MjData, *args: Any) -> Any:
+        record.append((data.qpos.copy(), []))
+        return knot(data, *args)
+
+    def pair_spy(layout: Any, ei: int, ri: int) -> float:
+        record[-1][1].append((layout.env_list[ei], layout.robot_list[ri]))
+        return pair(layout, ei, ri)
+
+    model._knot_from_data = knot_spy  # type: ignore[method-assign,assignment]
+    model._pair_distance = pair_spy  # type: ignore[method-assign]
+    try:
+        assess_plan(world, plan, model)
+    finally:
+        del model._knot_from_data, model._pair_distance
+    return record
+
+
+def _raw_seconds(world: World, record: list[tuple[Any, ...]], repeats: int) -> float:
+    """Best time of mj_kinematics + coal.distance (fresh transforms) on the recorded knots and pairs."""
+    m, d = world.model, mujoco.MjData(world.model)
+    shapes = {g: coal_geometry(m, g) for g in range(m.ngeom)}
+    req, res = coal.DistanceRequest(), coal.DistanceResult()
+    best = np.inf
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        for qpos, pairs in record:
+            d.qpos[:] = qpos
+            mujoco.mj_kinematics(m, d)
+            for e, r in pairs:
+                coal.distance(
+                    shapes[e],
+                    coal_transform(d.geom_xpos[e], d.geom_xmat[e]),
+                    shapes[r],
+                    coal_transform(d.geom_xpos[r], d.geom_xmat[r]),
+                    req,
+                    res,
+                )
+        best = min(best, time.perf_counter() - t0)
+    return float(best)
+
+
+def main(repeats: int = 3) -> None:
     world = build(load("book_transfer"))
+    task = world.scenario.mission[0]
     tick = time.perf_counter()
     planner = Planner(world)
+    model = CollisionModel(world, world.scenario.risk, uncertainty=world.scenario.uncertainty)
     setup = time.perf_counter() - tick
-    totals, per_step = [], []
-    rows: list[tuple[Trajectory, int, float, float]] = []
+    assess_task(world, task, planner, model)  # warm-up: caches, imports
+    totals: list[float] = []
+    runs: list[list[AlternativeRisk]] = []
     for _ in range(repeats):
         tick = time.perf_counter()
-        rows = plan_left_alternative(planner, world)
+        runs.append(assess_task(world, task, planner, model))
         totals.append(time.perf_counter() - tick)
-        per_step += [ik / max(it, 1) for _, it, ik, _ in rows]
-    print(f"planner setup: {setup * 1e3:.1f} ms")
+    best = runs[int(np.argmin(totals))]
+    print(f"book_transfer: planner + collision model setup {setup * 1e3:.0f} ms (once per world)")
     print(
-        f"{'segment':<14} {'iterations':>10} {'IK ms/step':>10} {'plan ms':>8} "
-        f"{'knots':>6} {'duration s':>10}"
+        f"{'alternative':<15}{'plan s':>8}{'assess s':>10}{'knots':>7}"
+        f"{'assess us/knot':>16}{'raw us/knot':>13}{'ratio':>7}"
     )
-    for traj, it, ik, total in rows:
-        print(
-            f"{traj.name:<14} {it:>10d} {ik / max(it, 1) * 1e3:>10.2f} {total * 1e3:>8.1f} "
-            f"{len(traj.times):>6d} {traj.duration:>10.2f}"
+    sum_assess = sum_raw = 0.0
+    sum_knots = 0
+    for alt in best:
+        if alt.plan is None:
+            print(f"{alt.name:<15}infeasible: {alt.error}")
+            continue
+        knots = _knots(alt.plan)
+        assess = min(
+            (a.assess_s for run in runs for a in run if a.name == alt.name and a.feasible),
+            default=alt.assess_s,
         )
-    its = [it for _, it, _, _ in rows]
-    knots = [len(t.times) for t, _, _, _ in rows]
-    print(f"mean IK step time: {np.mean(per_step) * 1e3:.2f} ms")
-    print(f"iterations per segment: mean {np.mean(its):.1f}, max {max(its)}")
-    print(f"knots per segment: mean {np.mean(knots):.1f}, max {max(knots)}")
+        raw = _raw_seconds(world, _record_pairs(model, world, alt.plan), repeats)
+        sum_assess, sum_raw, sum_knots = sum_assess + assess, sum_raw + raw, sum_knots + knots
+        print(
+            f"{alt.name:<15}{alt.plan_s:>8.3f}{assess:>10.3f}{knots:>7d}"
+            f"{assess / knots * 1e6:>16.1f}{raw / knots * 1e6:>13.1f}{assess / raw:>7.2f}"
+        )
+    total = float(min(totals))
     print(
-        f"total planning time, 8-segment alternative: mean {np.mean(totals):.3f} s, "
-        f"min {min(totals):.3f} s over {repeats} runs"
+        f"planning + risk assessment, all alternatives: {total:.3f} s (best of {repeats}; "
+        f"mean {np.mean(totals):.3f} s); target < {TARGET_TOTAL_S:.1f} s -> "
+        f"{total / TARGET_TOTAL_S:.2f}x the target"
     )
+    if sum_raw > 0.0:
+        ratio = sum_assess / sum_raw
+        print(
+            f"risk evaluation per knot: {sum_assess / sum_knots * 1e6:.1f} us vs raw mj_kinematics + "
+            f"coal.distance on the same pairs {sum_raw / sum_knots * 1e6:.1f} us: {ratio:.2f}x; target <= "
+            f"{TARGET_PER_KNOT_RATIO:.0f}x -> {ratio / TARGET_PER_KNOT_RATIO:.2f}x the target"
+        )
 
 
 if __name__ == "__main__":
-    main(sys.argv)
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 3)

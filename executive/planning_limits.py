@@ -228,35 +228,61 @@ class GeomPairCollisionLimit(mink.Limit):
         self._fromto = np.empty(6)
         self._jac1 = np.empty((3, model.nv))
         self._jac2 = np.empty((3, model.nv))
+        self._pair_list = [(int(a), int(b)) for a, b in self.pairs]
+        self._reach = model.geom_rbound[self.pairs[:, 0]] + model.geom_rbound[self.pairs[:, 1]]
+        # The last full query (every candidate within the detection distance): the qpos it was
+        # made at and, per candidate, (pair index, distance, witness fromto). The QP step that
+        # follows at the same configuration reuses it instead of asking MuJoCo again.
+        self._cache_qpos: FloatArray | None = None
+        self._cache: list[tuple[int, float, FloatArray]] = []
 
-    def distances(self, data: mujoco.MjData) -> FloatArray:
-        """Signed distance of every pair (capped at the detection distance)."""
+    def distances(self, data: mujoco.MjData, cutoff: float | None = None) -> FloatArray:
+        """Signed distance of every pair (capped at the detection distance).
+
+        ``cutoff``: only pairs whose bounding spheres come within it are asked (the rest, farther
+        than ``cutoff`` for sure, read as the detection distance); for callers that only compare
+        distances against clearances no larger than ``cutoff``. The distances asked are the same
+        ``mj_geomDistance`` values either way.
+        """
         out = np.full(len(self.pairs), self.detection_distance)
-        for i in self._candidates(data):
-            g1, g2 = self.pairs[i]
-            out[i] = mujoco.mj_geomDistance(
-                self.model, data, int(g1), int(g2), self.detection_distance, self._fromto
-            )
+        full = cutoff is None or cutoff >= self.detection_distance
+        cache: list[tuple[int, float, FloatArray]] = []
+        model, pairs, fromto, dmax = self.model, self._pair_list, self._fromto, self.detection_distance
+        for i in self._candidates(data, self.detection_distance if full else float(cutoff)).tolist():
+            g1, g2 = pairs[i]
+            d = mujoco.mj_geomDistance(model, data, g1, g2, dmax, fromto)
+            out[i] = d
+            if full:
+                cache.append((i, d, fromto.copy()))
+        if full:
+            self._cache_qpos, self._cache = data.qpos.copy(), cache
         return out
 
-    def _candidates(self, data: mujoco.MjData) -> NDArray[np.int_]:
-        """Bounding-sphere broadphase (as mink's): pairs that may be within the detection distance."""
+    def _candidates(self, data: mujoco.MjData, cutoff: float | None = None) -> NDArray[np.int_]:
+        """Bounding-sphere broadphase (as mink's): pairs that may be within ``cutoff`` (default: the
+        detection distance)."""
         if len(self.pairs) == 0:
             return np.zeros(0, dtype=int)
-        g1, g2 = self.pairs[:, 0], self.pairs[:, 1]
-        gap = np.linalg.norm(data.geom_xpos[g1] - data.geom_xpos[g2], axis=1)
-        gap -= self.model.geom_rbound[g1] + self.model.geom_rbound[g2]
-        return np.flatnonzero(gap <= self.detection_distance)
+        delta = data.geom_xpos[self.pairs[:, 0]] - data.geom_xpos[self.pairs[:, 1]]
+        gap = np.sqrt(np.einsum("ij,ij->i", delta, delta)) - self._reach
+        return np.flatnonzero(gap <= (self.detection_distance if cutoff is None else cutoff))
+
+    def _queries(self, data: mujoco.MjData) -> list[tuple[int, float, FloatArray]]:
+        """(pair, distance, fromto) of every candidate at ``data``'s configuration, from the cache
+        when the last full :meth:`distances` query was made at the same qpos."""
+        if self._cache_qpos is not None and np.array_equal(self._cache_qpos, data.qpos):
+            return self._cache
+        self.distances(data)
+        return self._cache
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt  # a bound on the displacement, see the class docstring
         model, data = self.model, configuration.data
         rows: list[FloatArray] = []
         bounds: list[float] = []
-        fromto, jac1, jac2 = self._fromto, self._jac1, self._jac2
-        for i in self._candidates(data):
-            g1, g2 = (int(g) for g in self.pairs[i])
-            dist = mujoco.mj_geomDistance(model, data, g1, g2, self.detection_distance, fromto)
+        jac1, jac2 = self._jac1, self._jac2
+        for i, dist, fromto in self._queries(data):
+            g1, g2 = self._pair_list[i]
             if dist >= self.detection_distance:
                 continue
             normal = fromto[3:] - fromto[:3]

@@ -235,6 +235,8 @@ def build_trajectory(
         )
     hands = {s: np.empty((len(times), 3)) for s in frames.hand_sites}
     floor = np.asarray(floor, dtype=float) - cfg.clearance_tolerance
+    # Pairs whose bounding spheres stay farther apart than every floor cannot break one: not asked.
+    cutoff = float(np.max(floor)) if len(floor) else 0.0
     for k in range(len(times)):
         data.qpos[:] = qpos[k]
         mujoco.mj_kinematics(model, data)
@@ -244,7 +246,7 @@ def build_trajectory(
             mujoco.mj_kinematics(model, data)
         for s, site in frames.hand_sites.items():
             hands[s][k] = data.site_xpos[site]
-        gaps = collisions.distances(data) - floor
+        gaps = collisions.distances(data, cutoff) - floor
         if np.any(gaps < 0):
             i = int(np.argmin(gaps))
             g1, g2 = (str(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)) for g in collisions.pairs[i])
