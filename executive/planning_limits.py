@@ -245,10 +245,12 @@ class GeomPairCollisionLimit(mink.Limit):
         ``mj_geomDistance`` values either way.
         """
         out = np.full(len(self.pairs), self.detection_distance)
-        full = cutoff is None or cutoff >= self.detection_distance
+        dmax = self.detection_distance
+        reach = dmax if cutoff is None else min(float(cutoff), dmax)
+        full = reach >= dmax
         cache: list[tuple[int, float, FloatArray]] = []
-        model, pairs, fromto, dmax = self.model, self._pair_list, self._fromto, self.detection_distance
-        for i in self._candidates(data, self.detection_distance if full else float(cutoff)).tolist():
+        model, pairs, fromto = self.model, self._pair_list, self._fromto
+        for i in self._candidates(data, reach).tolist():
             g1, g2 = pairs[i]
             d = mujoco.mj_geomDistance(model, data, g1, g2, dmax, fromto)
             out[i] = d
