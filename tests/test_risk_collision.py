@@ -287,6 +287,25 @@ def test_broad_phase_keeps_the_minimum_and_skips_most_pairs(world: World, cmodel
     assert float(np.min(fast.distances)) < world.scenario.risk.d_safety  # the reach comes close
 
 
+def test_travel_bound_along_a_trajectory_changes_no_answer(world: World, cmodel: CollisionModel) -> None:
+    """profile() skips pairs whose last coal distance less the travel since stays beyond the cutoff;
+    every knot must still equal a fresh, independent query of that knot (same minimum, witness
+    and near pairs)."""
+    qpos = np.linspace(world.home_qpos(), _reach_pose(world), 60)
+    path = Path(np.linspace(0.0, 3.0, 60), qpos)
+    prof = cmodel.profile(path)
+    alone = [cmodel.knot(q) for q in qpos]
+    for k, (a, b) in enumerate(zip(prof.knots, alone, strict=True)):
+        assert a.distance == b.distance, k
+        assert (a.robot_geom, a.env_geom) == (b.robot_geom, b.env_geom), k
+        np.testing.assert_array_equal(a.normal, b.normal)
+        assert [(p.env_geom, p.robot_geom, p.distance) for p in a.near] == [
+            (p.env_geom, p.robot_geom, p.distance) for p in b.near
+        ], k
+    # ... with fewer coal calls than the knots queried one by one.
+    assert prof.pairs_checked < sum(b.pairs_checked for b in alone)
+
+
 # --- 5. severity per body part ---------------------------------------------------------------------------
 
 

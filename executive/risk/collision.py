@@ -446,6 +446,60 @@ class _Layout(NamedTuple):
     n_pairs: int
 
 
+class _TravelBound:
+    """Lower bounds on pair distances from earlier exact ones along a trajectory.
+
+    A rigid geom's points move by at most ``|dp| + r ||dR||_F`` between two knots (``p`` its frame
+    origin, ``R`` its rotation, ``r`` its bounding radius ``geom_rbound`` about that origin:
+    ``|dR u| <= ||dR||_2 |u| <= ||dR||_F r``). Summed over the knots since a pair's last coal
+    distance ``d_j``, the travels ``T_robot + T_env`` bound its distance now from below:
+    ``d_k >= d_j - T_robot - T_env`` (triangle inequality), less ``slack`` for coal's own tolerance.
+    """
+
+    def __init__(self, model: mujoco.MjModel, layout: _Layout, slack: float = 1e-4) -> None:
+        self.robot, self.env = layout.robot, layout.env
+        self.radius_r = np.asarray(model.geom_rbound[self.robot], dtype=float)
+        self.radius_e = np.asarray(model.geom_rbound[self.env], dtype=float)
+        plane = int(mujoco.mjtGeom.mjGEOM_PLANE)
+        self.unbounded_r = np.asarray(model.geom_type[self.robot] == plane)
+        self.unbounded_e = np.asarray(model.geom_type[self.env] == plane)
+        self.slack = slack
+        self.cum_r = np.zeros(len(self.robot))
+        self.cum_e = np.zeros(len(self.env))
+        shape = (len(self.env), len(self.robot))
+        self.last = np.full(shape, -np.inf)  # distance at the pair's last coal query
+        self.last_r = np.zeros(shape)  # cum_r of its robot geom then
+        self.last_e = np.zeros(shape)  # cum_e of its environment geom then
+        self._pose: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None = None
+
+    def advance(self, data: mujoco.MjData) -> None:
+        """Add the travel from the previous knot to ``data``'s (its kinematics current)."""
+        pos_r, rot_r = data.geom_xpos[self.robot].copy(), data.geom_xmat[self.robot].copy()
+        pos_e, rot_e = data.geom_xpos[self.env].copy(), data.geom_xmat[self.env].copy()
+        if self._pose is not None:
+            p_r, m_r, p_e, m_e = self._pose
+            self.cum_r += self._travel(pos_r - p_r, rot_r - m_r, self.radius_r, self.unbounded_r)
+            self.cum_e += self._travel(pos_e - p_e, rot_e - m_e, self.radius_e, self.unbounded_e)
+        self._pose = (pos_r, rot_r, pos_e, rot_e)
+
+    @staticmethod
+    def _travel(
+        dp: FloatArray, dm: FloatArray, radius: FloatArray, unbounded: NDArray[np.bool_]
+    ) -> FloatArray:
+        step = np.sqrt(np.einsum("ij,ij->i", dp, dp)) + radius * np.sqrt(np.einsum("ij,ij->i", dm, dm))
+        return np.asarray(np.where(unbounded & (step > 0.0), np.inf, step), dtype=float)
+
+    def bounds(self) -> FloatArray:
+        """(E, R) lower bounds on every pair's distance at the current knot (-inf: never queried)."""
+        travel = (self.cum_r[None, :] - self.last_r) + (self.cum_e[:, None] - self.last_e)
+        return np.asarray(self.last - travel - self.slack, dtype=float)
+
+    def record(self, ei: int, ri: int, distance: float) -> None:
+        self.last[ei, ri] = distance
+        self.last_r[ei, ri] = self.cum_r[ri]
+        self.last_e[ei, ri] = self.cum_e[ei]
+
+
 class CollisionModel:
     """coal shapes of a world's geoms, built once; distance queries per configuration and trajectory.
 
@@ -645,10 +699,14 @@ class CollisionModel:
         qpos = np.asarray(trajectory.qpos, dtype=float)
         data = self._data
         knots = []
+        # Along a trajectory, a pair's last coal distance less the travel since bounds it too.
+        travel = _TravelBound(self.model, layout) if broad_phase else None
         for row in qpos:
             data.qpos[:] = row
             mujoco.mj_kinematics(self.model, data)
-            knots.append(self._knot_from_data(data, layout, broad_phase))
+            if travel is not None:
+                travel.advance(data)
+            knots.append(self._knot_from_data(data, layout, broad_phase, travel))
         return CollisionProfile(np.asarray(trajectory.times, dtype=float), tuple(knots))
 
     def _lower_bounds(self, data: mujoco.MjData, layout: _Layout) -> FloatArray:
@@ -683,12 +741,17 @@ class CollisionModel:
             )
         )
 
-    def _knot_from_data(self, data: mujoco.MjData, layout: _Layout, broad_phase: bool) -> KnotDistance:
+    def _knot_from_data(
+        self, data: mujoco.MjData, layout: _Layout, broad_phase: bool, travel: _TravelBound | None = None
+    ) -> KnotDistance:
         n_pairs = layout.n_pairs
         if n_pairs == 0:
             raise CollisionModelError("no robot-environment pair is left to check (all allowed)")
         if broad_phase:
-            bounds = np.where(layout.mask, self._lower_bounds(data, layout), np.inf)
+            lower = self._lower_bounds(data, layout)
+            if travel is not None:
+                lower = np.maximum(lower, travel.bounds())
+            bounds = np.where(layout.mask, lower, np.inf)
             first = bounds <= layout.cutoff[:, None]
         else:
             bounds = np.where(layout.mask, -np.inf, np.inf)
@@ -714,6 +777,8 @@ class CollisionModel:
             nonlocal best, best_e, best_r, witness, checked
             d = self._pair_distance(layout, ei, ri)
             checked += 1
+            if travel is not None:
+                travel.record(ei, ri, d)
             if d <= cutoff[ei]:
                 near.append(
                     NearPair(layout.env_body[ei], env_ids[ei], robot_ids[ri], d, np.array(res.normal))
