@@ -60,10 +60,11 @@ class MoveHand(RobotBehaviour):
     def update(self) -> Status:
         if self.failed_by_detector():
             return Status.FAILURE
-        t = self.robot.time - self._t0
-        dt = self.robot.control_dt
+        robot = self.robot  # one blackboard read per tick
+        t = robot.time - self._t0
+        dt = robot.control_dt
         q = self.trajectory.sample(t)
-        self.robot.set_joint_targets(q, (self.trajectory.sample(t + dt) - q) / dt)
+        robot.set_joint_targets(q, (self.trajectory.sample(t + dt) - q) / dt)
         if t < self.trajectory.duration:
             self.feedback_message = f"{self.trajectory.name}: {t:.2f}/{self.trajectory.duration:.2f} s"
             return Status.RUNNING
