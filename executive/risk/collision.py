@@ -55,9 +55,14 @@ import coal
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
-from scipy.special import ndtr
 
-from executive.errors import ExecutiveError
+from executive.risk.collision_probability import (
+    CollisionModelError,
+    NearPair,
+    ProbabilityEstimate,
+    collision_probability,
+    gaussian_union_probability,
+)
 from executive.risk.report import RiskReport
 from executive.risk.shapes import coal_geometry
 from executive.scenario_types import CollisionRiskConfig, RiskConfig, Uncertainty
@@ -88,13 +93,6 @@ FloatArray = NDArray[np.float64]
 #: Pairs excluded from a query: an environment geom/body name (all robot geoms), or a
 #: (robot geom or body name, environment geom or body name) pair.
 Allow = Collection[str | tuple[str, str]]
-
-_N_ANGLES = 720  # quadrature points of the 2-D Gaussian union integral
-_N_BINS = 3600  # direction bins (0.1 degree) for merging events with the same normal
-
-
-class CollisionModelError(ExecutiveError):
-    """A collision query names a geom, body or object the collision model does not have."""
 
 
 class TrajectoryLike(Protocol):
@@ -164,151 +162,6 @@ def seed_collision_score(
         exposure = float(np.sum(frac * np.diff(t)) / duration)
     score = config.peak_weight * peak + config.exposure_weight * exposure
     return SeedScore(float(score), peak, exposure)
-
-
-# --- first-order probability ---------------------------------------------------------------------
-
-
-def _union_by_group(
-    group: NDArray[np.int_], phi: FloatArray, h: FloatArray, n_groups: int, n_angles: int
-) -> FloatArray:
-    """Per group g: P(any event ``u(phi_i) . z > h_i`` of g) for ``z ~ N(0, I_2)``, all ``h_i > 0``.
-
-    Polar form: the safe set ``{u_i . z <= h_i}`` ends along direction theta at
-    ``r(theta) = min_i h_i / cos(theta - phi_i)``, and ``P(outside) = mean_theta exp(-r^2/2)``
-    (midpoint rule; for one event this is Craig's formula for ``Phi(-h)``). Directions are
-    snapped to 0.1 degree bins and only the nearest event per bin is kept (a sweep past a
-    flat face gives hundreds of events with one normal); the snap moves a boundary by at
-    most ``h (1 - cos 0.05 deg)`` ~ ``4e-7 h``.
-    """
-    out = np.zeros(n_groups)
-    if len(h) == 0:
-        return out
-    bins = np.round(phi * (_N_BINS / (2.0 * math.pi))).astype(int) % _N_BINS
-    order = np.lexsort((h, bins, group))
-    g, bn, hh = group[order], bins[order], h[order]
-    keep = np.ones(len(g), dtype=bool)
-    keep[1:] = (g[1:] != g[:-1]) | (bn[1:] != bn[:-1])
-    g, hh = g[keep], hh[keep]
-    angle = bn[keep] * (2.0 * math.pi / _N_BINS)
-    theta = (np.arange(n_angles) + 0.5) * (2.0 * math.pi / n_angles)
-    cos = np.cos(theta[None, :] - angle[:, None])  # (N, M)
-    reach = np.full(cos.shape, np.inf)
-    np.divide(hh[:, None], cos, out=reach, where=cos > 0.0)
-    starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
-    r = np.minimum.reduceat(reach, starts, axis=0)
-    out[g[starts]] = np.mean(np.exp(-0.5 * r * r), axis=1)
-    return out
-
-
-def gaussian_union_probability(a: FloatArray, b: FloatArray, n_angles: int = _N_ANGLES) -> float:
-    """P(any ``a_i . z > b_i``) for ``z ~ N(0, I_2)`` and every ``b_i > 0``, by 2-D quadrature.
-
-    The safe set is the convex polygon ``{a_i . z <= b_i}`` around the origin; along a ray
-    at angle theta it ends at ``r(theta) = min_i b_i / (a_i . u)``, and
-    ``P(outside) = (1/2pi) * integral exp(-r^2/2) dtheta`` (polar form of the Gaussian;
-    for one half-plane this is Craig's formula for ``Phi(-b/|a|)``).
-    """
-    a = np.asarray(a, dtype=float).reshape(-1, 2)
-    b = np.asarray(b, dtype=float).reshape(-1)
-    norm = np.hypot(a[:, 0], a[:, 1])
-    if np.any(b <= 0.0) or np.any(norm <= 0.0):
-        raise CollisionModelError("gaussian_union_probability needs every b_i > 0 and a_i != 0")
-    phi = np.arctan2(a[:, 1], a[:, 0])
-    return float(_union_by_group(np.zeros(len(b), dtype=int), phi, b / norm, 1, n_angles)[0])
-
-
-class NearPair(NamedTuple):
-    """A robot-environment pair that came within the model's cutoff at one knot."""
-
-    env_body: int
-    env_geom: int
-    robot_geom: int
-    distance: float
-    normal: FloatArray  # unit, from the environment geom to the robot geom (coal's o1 -> o2)
-
-
-class ProbabilityEstimate(NamedTuple):
-    """First-order P(collision) of a trajectory."""
-
-    probability: float  # exact union of the linearised events (static error per body)
-    lower: float  # max_k P_k
-    upper: float  # min(1, sum_k P_k)
-    per_knot: FloatArray  # P_k
-
-
-class _Events(NamedTuple):
-    """Linearised events ``u(phi) . z > h`` (z the body's shift over its sigma), by group."""
-
-    group: NDArray[np.int_]
-    phi: FloatArray
-    h: FloatArray
-    certain: NDArray[np.bool_]  # per group: some pair collides whatever the shift
-    worst: FloatArray  # per group: Phi(-min h) (only used when some h <= 0)
-
-
-def _group_probability(events: _Events, n_groups: int, n_angles: int) -> FloatArray:
-    """P(union) per group: 1 if certain; the largest single P (>= 0.5, a lower bound) if the
-    estimate already collides (the polar form needs a safe origin); else the polar integral."""
-    unsafe = np.zeros(n_groups, dtype=bool)
-    np.logical_or.at(unsafe, events.group, events.h <= 0.0)
-    ok = ~unsafe[events.group]
-    prob = _union_by_group(events.group[ok], events.phi[ok], events.h[ok], n_groups, n_angles)
-    prob = np.where(unsafe, events.worst, prob)
-    return np.where(events.certain, 1.0, prob)
-
-
-def collision_probability(
-    knots: Sequence[Sequence[NearPair]], sigma: Mapping[int, float], n_angles: int = _N_ANGLES
-) -> ProbabilityEstimate:
-    """First-order collision probability per knot and over the trajectory.
-
-    ``knots[k]`` holds the near pairs of knot k; ``sigma`` maps an environment body id to
-    its horizontal 1-sigma (missing: 0, exact). A body shifted by ``delta = sigma z`` makes
-    pair i collide when ``n_xy,i . z > d_i / sigma`` (first order along coal's normal).
-    Bodies are independent; per body the error is one static shift for the whole
-    trajectory (as ``world.sample_perturbation`` draws it once per trial). Events with
-    ``h > 9`` (P < 1e-19) are dropped.
-    """
-    n_knots = len(knots)
-    bodies = sorted({p.env_body for pairs in knots for p in pairs})
-    column = {b: i for i, b in enumerate(bodies)}
-    n_bodies = len(bodies)
-    # Group ids: knot-level (k * n_bodies + body) and trajectory-level (body).
-    kgroup: list[int] = []
-    phis: list[float] = []
-    hs: list[float] = []
-    certain = np.zeros(n_knots * n_bodies, dtype=bool)
-    worst = np.zeros(n_knots * n_bodies)
-    for k, pairs in enumerate(knots):
-        for p in pairs:
-            gid = k * n_bodies + column[p.env_body]
-            s = float(sigma.get(p.env_body, 0.0))
-            nx, ny = float(p.normal[0]), float(p.normal[1])
-            lateral = math.hypot(nx, ny)
-            if s * lateral <= 1e-12:  # no uncertainty along this normal: deterministic
-                certain[gid] |= p.distance <= 0.0
-                continue
-            reach = p.distance / (s * lateral)
-            if reach > 9.0:
-                continue
-            worst[gid] = max(worst[gid], float(ndtr(-reach)))
-            kgroup.append(gid)
-            phis.append(math.atan2(ny, nx))
-            hs.append(reach)
-    group = np.array(kgroup, dtype=int)
-    phi, h = np.array(phis), np.array(hs)
-    per_group = _group_probability(_Events(group, phi, h, certain, worst), n_knots * n_bodies, n_angles)
-    miss = np.prod(1.0 - per_group.reshape(n_knots, n_bodies), axis=1) if n_bodies else np.ones(n_knots)
-    per_knot = 1.0 - miss
-    body_of = group % n_bodies if n_bodies else group
-    tcertain = np.asarray(certain.reshape(n_knots, n_bodies).any(axis=0), dtype=bool)
-    tworst = worst.reshape(n_knots, n_bodies).max(axis=0) if n_knots else np.zeros(n_bodies)
-    per_body = _group_probability(_Events(body_of, phi, h, tcertain, tworst), n_bodies, n_angles)
-    lower = float(np.max(per_knot)) if n_knots else 0.0
-    upper = float(min(1.0, np.sum(per_knot)))
-    point = float(np.clip(1.0 - np.prod(1.0 - per_body), lower, upper))
-    return ProbabilityEstimate(point, lower, upper, per_knot)
 
 
 # --- the model ---------------------------------------------------------------------------------
