@@ -506,8 +506,21 @@ def assess_fall(
         per_knot[knots] = probability_outside_batch(verts, mu, cov)
     seed = _seed_batch(margins, radius, cfg.exponent)
 
-    polygon_list = [polygons.polygon(k) for k in range(count)]
-    probability, boole = persistent_bias_probability(polygon_list, coms, cov)
+    # Persistent bias (module doc): S = P_0 - mu_0 cut by every other knot's shifted half-planes.
+    a_parts, b_parts = [], []
+    for knots, verts in polygons.groups.values():
+        a, b = halfplanes_batch(verts)
+        a_parts.append(a.reshape(-1, 2))
+        b_parts.append((b - np.einsum("nij,nj->ni", a, coms[knots, :2])).reshape(-1))
+    safe = _intersect_halfplanes(
+        polygons.polygon(0) - coms[0, :2], np.concatenate(a_parts), np.concatenate(b_parts)
+    )
+    if safe is None:
+        probability, boole = 1.0, 1.0
+    else:
+        zero = np.zeros(2)
+        probability = probability_outside(safe, zero, cov)
+        boole = union_bounds(edge_probabilities(safe, zero, cov))[1]
     worst = float(np.max(per_knot))
     lower_bound = max(worst, float(np.max(lower_k)))
     probability = float(np.clip(probability, lower_bound, max(boole, lower_bound)))
@@ -545,6 +558,6 @@ def assess_fall(
             "circle_radius": float(radius),
             "com_sigma": float(uncertainty.com),
             "com_path_mismatch": mismatch,
-            "support_area": polygon_area(polygon_list[k_min]),
+            "support_area": polygon_area(polygons.polygon(k_min)),
         },
     )
