@@ -172,6 +172,7 @@ class Planner:
         ]
         self.tilt = TiltLimit(model, ids.torso_body, float(np.radians(cfg.max_torso_tilt_deg)))
         self.foot_geoms = [g for s in sorted(ids.foot_geoms) for g in ids.foot_geoms[s]]
+        self._pairs: dict[tuple[tuple[str, str] | None, tuple[str, ...]], list[tuple[int, int]]] = {}
         self._collision_groups()
 
     # --- setup helpers ----------------------------------------------------------------------
@@ -199,7 +200,19 @@ class Planner:
     def collision_pairs(
         self, carried: tuple[str, str] | None = None, allow_contact: Sequence[str] = ()
     ) -> list[tuple[int, int]]:
-        """Geom pairs the planner keeps apart for a move (after ``allow_contact`` is removed)."""
+        """Geom pairs the planner keeps apart for a move (after ``allow_contact`` is removed).
+
+        Built once per (carried, allow_contact) and kept: the groups depend on the model only.
+        """
+        key = (carried, tuple(allow_contact))
+        cached = self._pairs.get(key)
+        if cached is None:
+            cached = self._pairs[key] = self._collision_pairs(carried, allow_contact)
+        return list(cached)
+
+    def _collision_pairs(
+        self, carried: tuple[str, str] | None, allow_contact: Sequence[str]
+    ) -> list[tuple[int, int]]:
         ids = self.world.ids
         allowed = {self._geom(n) for n in allow_contact}
         carried_geom = ids.object_geoms[carried[1]] if carried else None
