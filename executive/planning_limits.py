@@ -16,6 +16,7 @@ limits into ``G dq <= h``.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 
@@ -254,7 +255,7 @@ class GeomPairCollisionLimit(mink.Limit):
             g1, g2 = pairs[i]
             d = mujoco.mj_geomDistance(model, data, g1, g2, dmax, fromto)
             out[i] = d
-            if full:
+            if full and d < dmax:  # the QP rows skip pairs at the detection distance
                 cache.append((i, d, fromto.copy()))
         if full:
             self._cache_qpos, self._cache = data.qpos.copy(), cache
@@ -288,10 +289,10 @@ class GeomPairCollisionLimit(mink.Limit):
             if dist >= self.detection_distance:
                 continue
             normal = fromto[3:] - fromto[:3]
-            length = float(np.linalg.norm(normal))
+            length = math.sqrt(float(normal.dot(normal)))  # = np.linalg.norm, without its overhead
             if length < 1e-9:  # touching: no witness direction, use the centres
                 normal = data.geom_xpos[g2] - data.geom_xpos[g1]
-                length = float(np.linalg.norm(normal))
+                length = math.sqrt(float(normal.dot(normal)))
                 if length < 1e-9:
                     continue
             normal = normal / length
