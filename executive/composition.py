@@ -10,7 +10,12 @@ planner into an :class:`AlternativePlan`, and turned into a py_trees Sequence.
 Grasp geometry: top-down, the jaws closing across the object's local y
 extent; a one-hand grasp at the object's centre, a handover grasp at the two
 ends of the object's local x axis (``handover_offset`` either side), so both
-hands fit side by side.
+hands fit side by side. Of the two ways to close across the object, a hand
+takes the one nearer its profile's ``closing_yaw`` (a hand with a thumb on one
+side, such as the G1's Dex3), else the one nearer its home pose's.
+
+After placing, a hand goes home keeping clear of the object it placed; a hand
+that placed across the body first goes back along the lane to its own side.
 """
 
 from __future__ import annotations
@@ -115,6 +120,15 @@ def _home_targets(world: World) -> dict[str, HandTarget]:
     return out
 
 
+def _home_base(world: World) -> tuple[FloatArray, float]:
+    """Position of the robot's base and yaw of its forward direction (base x) at the home keyframe."""
+    data = mujoco.MjData(world.model)
+    mujoco.mj_resetDataKeyframe(world.model, data, world.ids.keyframe)
+    mujoco.mj_kinematics(world.model, data)
+    mat = data.xmat[world.ids.base_body]
+    return data.xpos[world.ids.base_body].copy(), float(np.arctan2(mat[3], mat[0]))
+
+
 def transfer_steps(
     world: World, task: TransferTask, alternative: str, config: CompositionConfig | None = None
 ) -> list[Step]:
@@ -138,14 +152,26 @@ def transfer_steps(
     axis = np.array([np.cos(yaw), np.sin(yaw), 0.0])
     up = np.array([0.0, 0.0, 1.0])
     home = _home_targets(world)
+    base, heading = _home_base(world)
+    left_of_base = np.array([-np.sin(heading), np.cos(heading), 0.0])
+
+    def side_of_body(point: FloatArray) -> float:
+        """+1 left of the robot's midline, -1 right of it."""
+        return 1.0 if float(np.dot(np.asarray(point) - base, left_of_base)) >= 0.0 else -1.0
 
     def closing_near_home(side: str, hand_yaw: float) -> float:
-        # The jaws are symmetric: of the two closing directions, take the one nearer the home pose's.
-        mat = np.zeros(9)
-        mujoco.mju_quat2Mat(mat, home[side].quat)
-        home_yaw = float(np.arctan2(mat[4], mat[1]))  # yaw of the home frame's y (closing) axis
+        # Of the two closing directions across an object at hand_yaw, take the one nearer the
+        # preferred: the profile's closing_yaw (a hand with a thumb on one side), else the home
+        # pose's (symmetric jaws).
+        preferred = world.profile.arms[side].hand.closing_yaw_deg
+        if preferred is None:
+            mat = np.zeros(9)
+            mujoco.mju_quat2Mat(mat, home[side].quat)
+            want = float(np.arctan2(mat[4], mat[1]))  # yaw of the home frame's y (closing) axis
+        else:
+            want = heading + float(np.radians(preferred))
         closing = hand_yaw + np.pi / 2
-        return closing + np.pi if np.cos(closing - home_yaw) < 0 else closing
+        return closing + np.pi if np.cos(closing - want) < 0 else closing
 
     def target(side: str, point: FloatArray, hand_yaw: float, grasp_yaw: float | None = None) -> HandTarget:
         """Top-down hand target whose jaws close across an object at ``hand_yaw``.
@@ -181,6 +207,14 @@ def transfer_steps(
         lane_in = np.array([lane_x, grasp[1], carry_z])
         lane_out = np.array([lane_x, place[1], carry_z])
         carried = (s, obj)
+        # A hand that placed the object across the body first goes back along the lane to its own
+        # side, as it is (the retreat's orientation), and only then turns home: the straight way
+        # home from across the body swings the arm across the body's front while the hand turns,
+        # and the IK may bring it home in another arm configuration, with the waist still bent.
+        go_back: list[Step] = []
+        if side_of_body(place) != side_of_body(home[s].position):
+            back_point = np.array([lane_x, home[s].position[1], carry_z])
+            go_back.append(Step("move", f"{s}.back", s, (target(s, back_point, place_yaw, yaw),)))
         return [
             Step("move", f"{s}.pre_grasp", s, (target(s, grasp + cfg.approach_height * up, yaw),)),
             Step("move", f"{s}.approach", s, (target(s, grasp, yaw),), allow_contact=(obj,)),
@@ -213,7 +247,10 @@ def transfer_steps(
                 (target(s, place + cfg.approach_height * up, place_yaw, yaw),),
                 allow_contact=(obj,),
             ),
-            Step("home", f"{s}.home", s, (home[s],), allow_contact=(obj,)),
+            *go_back,
+            # The way home keeps clear of the object just placed (a hand that rotates back to its
+            # home pose can sweep its fingers into it); brushing it is tolerated (obj).
+            Step("home", f"{s}.home", s, (home[s],), obj=obj),
         ]
 
     giver, receiver = alternative.split("_to_")
@@ -411,7 +448,7 @@ def transfer_steps(
             (target(receiver, place_r + cfg.approach_height * up, final_yaw, h_yaw),),
             allow_contact=(obj,),
         ),
-        Step("home", f"{receiver}.home", receiver, (home[receiver],), allow_contact=(obj,)),
+        Step("home", f"{receiver}.home", receiver, (home[receiver],), obj=obj),
     ]
 
 
@@ -490,7 +527,8 @@ def build_subtree(plan: AlternativePlan, *, guard: bool = False) -> py_trees.com
             children.append(Release(step.name, step.side, step.obj))
         else:
             # After a release the open jaws may still brush the object they let go of.
-            touching = (step.side, step.allow_contact[0]) if step.kind in ("retreat", "home") else None
+            let_go = step.obj or (step.allow_contact[0] if step.allow_contact else "")
+            touching = (step.side, let_go) if step.kind in ("retreat", "home") and let_go else None
             mover = movers[step.kind](step.name, plan.trajectories[step.name], touching=touching or None)
             children.append(
                 RiskGuard(

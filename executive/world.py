@@ -9,7 +9,8 @@ estimate.
 The robot's MJCF is loaded with ``mujoco.MjSpec`` and the scene is added to
 its world body, so any robot model with a profile works. The robot's standing
 keyframe is re-created over the whole world (robot joints first, then one
-free joint per object), under the profile's keyframe name.
+free joint per object), under the profile's keyframe name, with the profile's
+``home_joints`` angles and every hand at its open pose: the home pose.
 """
 
 from __future__ import annotations
@@ -220,6 +221,8 @@ def build(
         raise WorldError(f"{scenario.robot.mjcf}: the scene did not compile: {exc}") from exc
     data = mujoco.MjData(model)
     ids = _collect_ids(model, profile, scenario, floor_name, table_names)
+    _set_home_joints(model, profile, ids.keyframe)
+    _open_hands_at_home(model, profile, ids)
     world = World(model, data, scenario, profile, world_kind, pert, ids)
     world.reset()
     return world
@@ -415,6 +418,52 @@ def _rpy_quat(roll: float, pitch: float, yaw: float) -> FloatArray:
     quat = np.zeros(4)
     mujoco.mju_euler2Quat(quat, np.array([roll, pitch, yaw]), "XYZ")
     return quat
+
+
+def _is_position_servo(model: mujoco.MjModel, actuator: int) -> bool:
+    """A joint actuator whose control is the joint's target position (affine bias)."""
+    return int(model.actuator_trntype[actuator]) == int(mujoco.mjtTrn.mjTRN_JOINT) and int(
+        model.actuator_biastype[actuator]
+    ) == int(mujoco.mjtBias.mjBIAS_AFFINE)
+
+
+def _set_home_joints(model: mujoco.MjModel, profile: RobotProfile, key: int) -> None:
+    """Replace the keyframe's angles of the profile's ``home_joints`` (and their servos' targets)."""
+    for name, value in profile.home_joints.items():
+        joint = int(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name))
+        hinge_or_slide = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+        if joint < 0 or int(model.jnt_type[joint]) not in hinge_or_slide:
+            raise WorldError(
+                f"robot profile '{profile.name}' ({profile.source}): home_joints names '{name}', "
+                "which is not a hinge or slide joint of the MJCF model"
+            )
+        lo, hi = model.jnt_range[joint]
+        if model.jnt_limited[joint] and not lo <= value <= hi:
+            raise WorldError(
+                f"robot profile '{profile.name}' ({profile.source}): home_joints.{name} = {value:g} "
+                f"is outside the joint's range [{lo:g}, {hi:g}]"
+            )
+        model.key_qpos[key, model.jnt_qposadr[joint]] = value
+        for actuator in range(model.nu):
+            if _is_position_servo(model, actuator) and int(model.actuator_trnid[actuator, 0]) == joint:
+                model.key_ctrl[key, actuator] = value
+
+
+def _open_hands_at_home(model: mujoco.MjModel, profile: RobotProfile, ids: WorldIds) -> None:
+    """Start with every hand open: its gripper's targets and joints at the profile's open pose.
+
+    A model's own keyframe may hold its fingers elsewhere (the menagerie's G1 stands with
+    the Dex3 thumbs swung in); a grasp begins from the open hand the planner assumes (it
+    freezes the finger joints at their start). A gripper actuator that is a position servo
+    of one joint has its open target as that joint's position too.
+    """
+    key = ids.keyframe
+    for side, arm in profile.arms.items():
+        for actuator, value in zip(ids.gripper_actuators[side], arm.gripper.open, strict=True):
+            model.key_ctrl[key, actuator] = value
+            if _is_position_servo(model, actuator):
+                joint = int(model.actuator_trnid[actuator, 0])
+                model.key_qpos[key, model.jnt_qposadr[joint]] = value
 
 
 # --- ids ----------------------------------------------------------------------------------

@@ -37,19 +37,33 @@ def g1_mjcf() -> Path:
 
 @pytest.fixture
 def g1_scenario_yaml(g1_mjcf: Path) -> str:
-    """The book scene scaled to the Unitree G1 (1.3 m tall): lower, nearer table."""
+    """The book scene scaled to the Unitree G1 (1.3 m tall): a lower, nearer table.
+
+    Laid out for the G1's Dex3 hands. Their grasp is a palm-down pinch across the
+    book's 9 cm width (see scenarios/robots/unitree_g1/profile.yaml), so a hand
+    holding a book has its wrist about 10 cm to one side of it, and a hand that
+    works across the body has that wrist between the book and the stack. The stack
+    therefore stands behind the row of books (its front face 3 cm behind their far
+    ends) and the books 22 cm either side of the midline: the one-arm alternatives
+    still carry the book across the body past the stack's front, as in the
+    humanoid's scene, but a hand at either book has room beside it. (The first
+    layout, books at y = +-0.17 m 6.5 cm from a stack level with them, left the
+    wrist no room: the left hand stopped 1.6 cm short of its pre-place, the right
+    1.6 cm short of its pre-grasp.) The table's front edge is 1 cm under the books'
+    near ends.
+    """
     mjcf = g1_mjcf
     return f"""
 name: g1_book_transfer
 description: The book transfer scene around the Unitree G1 with Dex3 hands.
 robot: {{mjcf: {mjcf}, profile: unitree_g1}}
 scene:
-  table: {{position: [0.50, 0.0], size: [0.50, 1.0, 0.04], height: 0.66}}
+  table: {{position: [0.47, 0.0], size: [0.50, 1.0, 0.04], height: 0.66}}
   objects:
-    - {{name: book, shape: box, size: [0.14, 0.09, 0.04], position: [0.33, 0.17], mass: 0.3}}
+    - {{name: book, shape: box, size: [0.14, 0.09, 0.04], position: [0.30, 0.22], mass: 0.3}}
   obstacles:
-    - {{name: book_stack, shape: box, size: [0.16, 0.12, 0.22], position: [0.38, 0.0]}}
+    - {{name: book_stack, shape: box, size: [0.16, 0.12, 0.22], position: [0.48, 0.0]}}
 uncertainty: {{object_position: 0.01, object_yaw: 3, obstacle_position: 0.01, com: 0.01}}
 mission:
-  - transfer: {{object: book, to: [0.33, -0.17]}}
+  - transfer: {{object: book, to: [0.30, -0.22]}}
 """

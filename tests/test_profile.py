@@ -57,6 +57,11 @@ def test_g1_profile_schema() -> None:
         assert len(p.leg_joints[side]) == 6
         assert p.feet[side].geoms == ()
     assert p.arms["left"].hand.offset[1] == -p.arms["right"].hand.offset[1]
+    # the Dex3 hands close with their fingers towards the midline; the arms stand a little out
+    assert (p.arms["left"].hand.closing_yaw_deg, p.arms["right"].hand.closing_yaw_deg) == (-90.0, 90.0)
+    assert p.home_joints == {"left_shoulder_roll_joint": 0.4, "right_shoulder_roll_joint": -0.4}
+    assert load_bundled_profile("humanoid").arms["left"].hand.closing_yaw_deg is None
+    assert load_bundled_profile("humanoid").home_joints == {}
 
 
 def test_unknown_bundled_robot_lists_the_bundled_ones() -> None:
@@ -152,6 +157,25 @@ PROFILE_CASES: list[tuple[str, Callable[[Doc], Doc], str, str]] = [
         "joint 'left_knee' is listed twice (also at waist_joints[1])",
     ),
     ("bool-keyframe", put("keyframe", True), "keyframe", "expected a string, got bool True"),
+    (
+        "closing-yaw-range",
+        put("arms.left.hand", {"site": "a", "closing_yaw": 270}),
+        "arms.left.hand.closing_yaw",
+        "expected a number >= -180 and <= 180, got int 270",
+    ),
+    (
+        "closing-yaw-string",
+        put("arms.right.hand", {"body": "b", "closing_yaw": "left"}),
+        "arms.right.hand.closing_yaw",
+        "expected a number, got str",
+    ),
+    ("home-joints-list", put("home_joints", [0.1]), "home_joints", "expected a mapping"),
+    (
+        "home-joint-angle",
+        put("home_joints", {"left_shoulder1": "up"}),
+        "home_joints.left_shoulder1",
+        "expected a number, got str",
+    ),
 ]
 
 
@@ -238,26 +262,67 @@ def test_every_name_in_the_g1_profile_exists_in_the_model(g1_model: Any) -> None
             assert all(lo - 1e-9 <= v <= hi + 1e-9 for v in low_high), name
 
 
-def test_g1_hand_frame_points_along_the_fingers(g1_model: Any) -> None:
-    """+z of the hand frame is the palm -> fingertip direction, and the grasp point lies between the
-    finger and thumb tips of the closed grip (checked by forward kinematics)."""
+def _hand_points(model: Any, side: str, pose: tuple[float, ...]) -> dict[str, np.ndarray]:
+    """Vertices of the collision meshes of one G1 hand, in its profile hand frame, by forward
+    kinematics with the gripper joints at ``pose``: "palm" (the wrist link), "thumb", "fingers"."""
     import mujoco
 
     p = load_bundled_profile("unitree_g1")
-    data = mujoco.MjData(g1_model)
-    mujoco.mj_resetDataKeyframe(g1_model, data, g1_model.key(p.keyframe).id)
-    for arm in p.arms.values():
-        for name, value in zip(arm.gripper.actuators, arm.gripper.closed, strict=True):
-            data.qpos[g1_model.jnt_qposadr[g1_model.actuator(name).trnid[0]]] = value
-    mujoco.mj_forward(g1_model, data)
-    for side, arm in p.arms.items():
-        body = g1_model.body(arm.hand_body).id
-        rotation = data.xmat[body].reshape(3, 3)
-        quat_matrix = np.zeros(9)
-        mujoco.mju_quat2Mat(quat_matrix, np.array(arm.hand.quat))
-        site_z = quat_matrix.reshape(3, 3)[:, 2]
-        assert site_z == pytest.approx([1.0, 0.0, 0.0], abs=1e-6)  # body +x: along the fingers
-        point = data.xpos[body] + rotation @ np.array(arm.hand.offset)
-        for tip in ("thumb_2", "middle_1", "index_1"):
-            tip_body = data.xpos[g1_model.body(f"{side}_hand_{tip}_link").id]
-            assert np.linalg.norm(tip_body - point) < 0.08, (side, tip)
+    arm = p.arms[side]
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, model.key(p.keyframe).id)
+    for name, value in zip(arm.gripper.actuators, pose, strict=True):
+        data.qpos[model.jnt_qposadr[model.actuator(name).trnid[0]]] = value
+    mujoco.mj_kinematics(model, data)
+    wrist = model.body(arm.hand_body).id
+    rot = np.zeros(9)
+    mujoco.mju_quat2Mat(rot, np.array(arm.hand.quat))
+    site_rot = data.xmat[wrist].reshape(3, 3) @ rot.reshape(3, 3)
+    site_pos = data.xpos[wrist] + data.xmat[wrist].reshape(3, 3) @ np.array(arm.hand.offset)
+    out: dict[str, list[np.ndarray]] = {"palm": [], "thumb": [], "fingers": []}
+    for g in range(model.ngeom):
+        body = int(model.geom_bodyid[g])
+        name = model.body(body).name
+        if not model.geom_contype[g] or not (body == wrist or name.startswith(f"{side}_hand_")):
+            continue
+        if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
+            mesh = model.geom_dataid[g]
+            start, count = model.mesh_vertadr[mesh], model.mesh_vertnum[mesh]
+            local = model.mesh_vert[start : start + count]
+        else:  # a box or other primitive: the corners of its size box
+            signs = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)])
+            local = signs * model.geom_size[g]
+        world = data.geom_xpos[g] + local @ data.geom_xmat[g].reshape(3, 3).T
+        part = "palm" if body == wrist else "thumb" if "thumb" in name else "fingers"
+        out[part].append((world - site_pos) @ site_rot)
+    return {k: np.vstack(v) for k, v in out.items()}
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_g1_hand_frame_pinches_across_a_book(g1_model: Any, side: str) -> None:
+    """The G1 hand frame against the Dex3 collision meshes (forward kinematics, not the profile's
+    numbers): palm above the site (+z, the approach, points away from it), thumb on -y and the two
+    fingers on +y with the site midway, open wide enough for the test scene's 9 cm book with room
+    for the approach, shallow enough for a site 1 cm under the top of the 4 cm book to keep the
+    open hand clear of the table, and closing onto the book: fingers to its face, thumb past it."""
+    arm = load_bundled_profile("unitree_g1").arms[side]
+    half_width, top, bottom = 0.045, -0.01, 0.03  # the book in the site frame (z down)
+    open_ = _hand_points(g1_model, side, arm.gripper.open)
+    # palm down: the whole palm lies behind the grasp point, at least 3 cm
+    assert open_["palm"][:, 2].max() < -0.03
+    # what passes beside the book on the way down (below its top face): thumb on -y, fingers on +y
+    thumb = open_["thumb"][open_["thumb"][:, 2] > top]
+    fingers = open_["fingers"][open_["fingers"][:, 2] > top]
+    assert len(thumb) and len(fingers)
+    inner_thumb, inner_fingers = float(thumb[:, 1].max()), float(fingers[:, 1].min())
+    assert inner_thumb < -(half_width + 0.02) and inner_fingers > half_width + 0.02  # 2 cm each side
+    assert abs(inner_thumb + inner_fingers) < 0.002  # the site is midway
+    # the lowest point of the open hand: 1 to 2 cm past the site (the table is 3 cm past it)
+    lowest = max(float(v[:, 2].max()) for v in open_.values())
+    assert 0.01 <= lowest <= bottom - 0.01
+    # closed: the finger tips just reach into the book's face (a squeeze of under 6 mm) and the
+    # thumb presses well past it (it pushes the book against the fingers)
+    closed = _hand_points(g1_model, side, arm.gripper.closed)
+    band = closed["fingers"][(closed["fingers"][:, 2] > top) & (closed["fingers"][:, 2] < bottom)]
+    assert half_width - 0.006 < float(band[:, 1].min()) < half_width
+    assert float(closed["thumb"][:, 1].max()) > -half_width + 0.02

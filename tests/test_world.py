@@ -11,7 +11,7 @@ import pytest
 from executive.errors import WorldError
 from executive.scenario import load
 from executive.scenario_types import Body, Uncertainty
-from executive.world import Perturbation, build, build_pair, sample_perturbation
+from executive.world import Perturbation, build, build_pair, sample_perturbation, subtree_bodies
 
 
 @pytest.fixture(scope="module")
@@ -136,3 +136,109 @@ def test_world_works_with_a_sphere_and_cylinder(scenario) -> None:  # type: igno
     assert set(world.ids.object_bodies) == {"book", "ball", "can"}
     # one free joint (7 qpos) per object after the robot
     assert world.model.nq == build(scenario).model.nq + 14
+
+
+# ----------------------------------------------------------------------------- the home pose
+
+
+def _robot_key(world):  # type: ignore[no-untyped-def]
+    """The home keyframe's robot part (robot joints come first, objects after)."""
+    m = world.model
+    robot_nq = int(m.nq) - 7 * len(world.ids.object_bodies)
+    return m.key_qpos[world.ids.keyframe, :robot_nq], m.key_ctrl[world.ids.keyframe]
+
+
+def test_humanoid_home_is_its_models_keyframe(scenario, estimate) -> None:  # type: ignore[no-untyped-def]
+    """No home_joints, hands already open in its keyframe: home is the MJCF's own 'stand'."""
+    model = mujoco.MjModel.from_xml_path(str(scenario.robot.mjcf))
+    key = model.key("stand").id
+    qpos, ctrl = _robot_key(estimate)
+    assert np.array_equal(qpos, model.key_qpos[key])
+    assert np.array_equal(ctrl, model.key_ctrl[key])
+
+
+def _with_home_joints(scenario, tmp_path, home_joints):  # type: ignore[no-untyped-def]
+    import yaml
+
+    from executive import registry
+
+    path = registry.robot_profile_path("humanoid")
+    data = yaml.safe_load(path.read_text())  # type: ignore[union-attr]
+    data["mjcf"] = str(scenario.robot.mjcf)
+    data["home_joints"] = home_joints
+    profile = tmp_path / "profile.yaml"
+    profile.write_text(yaml.safe_dump(data))
+    return replace(scenario, robot=replace(scenario.robot, profile=profile))
+
+
+def test_home_joints_replace_the_keyframes_angles(scenario, estimate, tmp_path) -> None:  # type: ignore[no-untyped-def]
+    world = build(_with_home_joints(scenario, tmp_path, {"left_elbow": -1.0}))
+    m = world.model
+    joint, actuator = m.joint("left_elbow").id, m.actuator("left_elbow").id
+    qpos, ctrl = _robot_key(world)
+    base_qpos, base_ctrl = _robot_key(estimate)
+    assert qpos[m.jnt_qposadr[joint]] == -1.0 != base_qpos[m.jnt_qposadr[joint]]
+    assert ctrl[actuator] == -1.0  # its position servo's target too
+    assert np.array_equal(np.delete(ctrl, actuator), np.delete(base_ctrl, actuator))
+    others = np.arange(len(qpos)) != m.jnt_qposadr[joint]
+    assert np.array_equal(qpos[others], base_qpos[others])
+    assert world.data.qpos[m.jnt_qposadr[joint]] == -1.0  # the world starts there
+
+
+@pytest.mark.parametrize(
+    ("home_joints", "message"),
+    [
+        ({"left_elbw": 0.1}, "'left_elbw', which is not a hinge or slide joint"),
+        ({"left_elbow": 9.0}, "outside"),
+    ],
+)
+def test_bad_home_joints_are_world_errors(scenario, tmp_path, home_joints, message) -> None:  # type: ignore[no-untyped-def]
+    with pytest.raises(WorldError, match=message):
+        build(_with_home_joints(scenario, tmp_path, home_joints))
+
+
+def test_g1_starts_with_open_hands_clear_of_its_body(g1_scenario_yaml: str) -> None:
+    """The G1's home: its keyframe, the arms at the profile's home_joints, the Dex3 hands at their
+    open pose (the model's keyframe has them half closed); open, they keep the planner's 2 cm from
+    the rest of the robot, and standing half a second they stay open, touching nothing."""
+    from executive.scenario import loads
+
+    world = build(loads(g1_scenario_yaml, source="g1_book_transfer.yaml"))
+    m, d, profile = world.model, world.data, world.profile
+    model = mujoco.MjModel.from_xml_path(str(world.scenario.robot.mjcf))
+    key = model.key(profile.keyframe).id
+    qpos, ctrl = _robot_key(world)
+    expected_q, expected_ctrl = model.key_qpos[key].copy(), model.key_ctrl[key].copy()
+    for name, value in profile.home_joints.items():
+        expected_q[model.jnt_qposadr[model.joint(name).id]] = value
+        expected_ctrl[model.actuator(name).id] = value
+    for arm in profile.arms.values():
+        for name, value in zip(arm.gripper.actuators, arm.gripper.open, strict=True):
+            expected_q[model.jnt_qposadr[model.actuator(name).trnid[0]]] = value
+            expected_ctrl[model.actuator(name).id] = value
+    assert np.array_equal(qpos, expected_q)
+    assert np.array_equal(ctrl, expected_ctrl)
+    assert not np.array_equal(expected_q, model.key_qpos[key])  # the hands did change
+
+    hand = {
+        g
+        for side in profile.sides
+        for g in world.ids.robot_geoms
+        if m.geom_bodyid[g] in world.ids.hand_bodies[side]
+    }
+    arm_bodies = {
+        b
+        for side in profile.sides
+        for b in subtree_bodies(m, int(m.jnt_bodyid[world.ids.arm_joints[side][0]]))
+    }
+    rest = [g for g in world.ids.robot_geoms if int(m.geom_bodyid[g]) not in arm_bodies]
+    fromto = np.zeros(6)
+    gap = min(mujoco.mj_geomDistance(m, d, a, b, 0.1, fromto) for a in hand for b in rest)
+    assert gap > 0.02
+    for _ in range(round(0.5 / m.opt.timestep)):
+        d.ctrl[:] = world.home_ctrl()
+        mujoco.mj_step(m, d)
+    assert not any({int(c.geom1), int(c.geom2)} & hand for c in d.contact[: d.ncon])
+    for side, arm in profile.arms.items():
+        joints = m.actuator_trnid[list(world.ids.gripper_actuators[side]), 0]
+        assert np.allclose(d.qpos[m.jnt_qposadr[joints]], arm.gripper.open, atol=0.02)

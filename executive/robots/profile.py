@@ -8,6 +8,7 @@ The schema by example is ``scenarios/robots/humanoid/profile.yaml``::
     torso_body: torso
     head_body: head               # optional (null: no head)
     keyframe: stand
+    home_joints: {name: angle}    # optional; rad, replacing the keyframe's angles of these joints
     waist_joints: [...]
     legs: {left: [...], right: [...]}
     feet: {left: {body: ..., geoms: [...]}, right: {...}}      # geoms optional
@@ -15,6 +16,7 @@ The schema by example is ``scenarios/robots/humanoid/profile.yaml``::
       left:
         joints: [...]             # shoulder to wrist, non-empty
         hand: {site: ...}         # or {body: ..., offset: [x, y, z], quat: [w, x, y, z]}
+                                  # optional closing_yaw: deg (HandFrame.closing_yaw_deg)
         hand_body: ...
         forearm_body: ...         # optional
         gripper: {actuators: [...], open: [...], closed: [...]}   # equal lengths
@@ -40,7 +42,7 @@ __all__ = ["SIDES", "load_bundled_profile", "load_profile", "loads_profile", "pr
 SIDES: tuple[str, ...] = ("left", "right")
 
 _TOP_REQUIRED = ("name", "base_body", "torso_body", "keyframe", "waist_joints", "legs", "feet", "arms")
-_TOP_OPTIONAL = ("mjcf", "head_body")
+_TOP_OPTIONAL = ("mjcf", "head_body", "home_joints")
 
 
 def load_profile(path: Path) -> RobotProfile:
@@ -78,6 +80,8 @@ def profile_from_node(root: Node, base_dir: Path, source_path: Path | None = Non
     head_node = root.opt("head_body")
     head_body = head_node.string() if head_node is not None else None
     keyframe = root.get("keyframe").string()
+    home_node = root.opt("home_joints")
+    home_joints = {name: node.number() for name, node in home_node.items()} if home_node is not None else {}
     waist_joints = root.get("waist_joints").strings()
     leg_joints = {side: node.strings(min_len=1) for side, node in _sides(root.get("legs"))}
     feet = {side: _foot(node) for side, node in _sides(root.get("feet"))}
@@ -94,6 +98,7 @@ def profile_from_node(root: Node, base_dir: Path, source_path: Path | None = Non
         leg_joints=leg_joints,
         mjcf=mjcf,
         source=source_path,
+        home_joints=home_joints,
     )
     _check_unique_joints(root, profile)
     return profile
@@ -123,7 +128,9 @@ def _arm(node: Node) -> ArmProfile:
 
 
 def _hand(node: Node) -> HandFrame:
-    node.check_keys(optional=("site", "body", "offset", "quat"))
+    node.check_keys(optional=("site", "body", "offset", "quat", "closing_yaw"))
+    closing_node = node.opt("closing_yaw")
+    closing = closing_node.number(ge=-180.0, le=180.0) if closing_node is not None else None
     site, body = node.opt("site"), node.opt("body")
     if (site is None) == (body is None):
         node.fail("expected exactly one of 'site' (an existing site) or 'body' (plus offset and quat)")
@@ -131,7 +138,7 @@ def _hand(node: Node) -> HandFrame:
         for key in ("offset", "quat"):
             if node.has(key):
                 node.child(key, None).fail(f"'{key}' only applies with 'body', not with 'site'")
-        return HandFrame(site=site.string() if site is not None else None)
+        return HandFrame(site=site.string() if site is not None else None, closing_yaw_deg=closing)
     offset_node, quat_node = node.opt("offset"), node.opt("quat")
     offset = offset_node.numbers(3) if offset_node is not None else (0.0, 0.0, 0.0)
     quat = (1.0, 0.0, 0.0, 0.0)
@@ -141,7 +148,12 @@ def _hand(node: Node) -> HandFrame:
         if norm < 1e-6:
             quat_node.fail("expected a unit quaternion [w, x, y, z], got a zero quaternion")
         quat = (raw[0] / norm, raw[1] / norm, raw[2] / norm, raw[3] / norm)
-    return HandFrame(body=body.string(), offset=(offset[0], offset[1], offset[2]), quat=quat)
+    return HandFrame(
+        body=body.string(),
+        offset=(offset[0], offset[1], offset[2]),
+        quat=quat,
+        closing_yaw_deg=closing,
+    )
 
 
 def _gripper(node: Node) -> GripperProfile:

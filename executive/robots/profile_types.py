@@ -7,7 +7,7 @@ model; the world builder checks every one exists when it builds the model.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 __all__ = ["ArmProfile", "FootProfile", "GripperProfile", "HandFrame", "RobotProfile"]
@@ -21,12 +21,19 @@ class HandFrame:
     direction); +y is the direction the jaws/fingers close along.
     When ``site`` is None the world builder adds a site named
     ``executive_<side>_hand`` on ``body`` at ``offset`` with ``quat``.
+
+    ``closing_yaw_deg``: for a hand whose two closing directions are not alike (a
+    thumb on one side, fingers on the other), the preferred yaw of +y about the
+    vertical, relative to the robot's forward direction, when the hand grasps from
+    above: of the two ways to close across an object, the one nearer this is taken.
+    None: the jaws are symmetric, and the way nearer the home pose's is taken.
     """
 
     site: str | None = None
     body: str | None = None
     offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
     quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)  # w x y z, in the body frame
+    closing_yaw_deg: float | None = None
 
 
 @dataclass(frozen=True)
@@ -68,6 +75,9 @@ class RobotProfile:
     leg_joints: dict[str, tuple[str, ...]]  # keys "left" and "right"
     mjcf: Path | None = None  # the model this profile ships with (bundled robots)
     source: Path | None = None  # the profile file
+    # Joint angles (rad) that replace the keyframe's in the home pose, e.g. arms held a little
+    # further out so that open hands keep clear of the body.
+    home_joints: dict[str, float] = field(default_factory=dict)
 
     @property
     def sides(self) -> tuple[str, ...]:
