@@ -300,57 +300,62 @@ class _Layout(NamedTuple):
 
 
 class _TravelBound:
-    """Lower bounds on pair distances from earlier exact ones along a trajectory.
+    """Lower bounds on pair distances along a trajectory, every knot's computed up front.
 
-    A rigid geom's points move by at most ``|dp| + r ||dR||_F`` between two knots (``p`` its frame
-    origin, ``R`` its rotation, ``r`` its bounding radius ``geom_rbound`` about that origin:
-    ``|dR u| <= ||dR||_2 |u| <= ||dR||_F r``). Summed over the knots since a pair's last coal
-    distance ``d_j``, the travels ``T_robot + T_env`` bound its distance now from below:
-    ``d_k >= d_j - T_robot - T_env`` (triangle inequality), less ``slack`` for coal's own tolerance.
+    Two bounds per pair and knot, the larger wins: the broad phase's (robot bounding sphere vs
+    environment oriented box, :meth:`CollisionModel._lower_bounds`), and one from the pair's last
+    coal distance ``d_j``: a rigid geom's points move by at most ``|dp| + r ||dR||_F`` between two
+    knots (``p`` its frame origin, ``R`` its rotation, ``r`` its bounding radius ``geom_rbound``
+    about that origin: ``|dR u| <= ||dR||_F |u|``), so with ``T`` the geoms' travel summed since
+    knot j, ``d_k >= d_j - T_robot - T_env`` (triangle inequality), less ``slack`` for coal's
+    tolerance.
     """
 
-    def __init__(self, model: mujoco.MjModel, layout: _Layout, slack: float = 1e-4) -> None:
-        self.robot, self.env = layout.robot, layout.env
-        self.radius_r = np.asarray(model.geom_rbound[self.robot], dtype=float)
-        self.radius_e = np.asarray(model.geom_rbound[self.env], dtype=float)
-        plane = int(mujoco.mjtGeom.mjGEOM_PLANE)
-        self.unbounded_r = np.asarray(model.geom_type[self.robot] == plane)
-        self.unbounded_e = np.asarray(model.geom_type[self.env] == plane)
+    def __init__(
+        self, model: mujoco.MjModel, layout: _Layout, xpos: FloatArray, xmat: FloatArray, slack: float = 1e-4
+    ) -> None:
+        # xpos (K, E + R, 3) and xmat (K, E + R, 9): the environment geoms, then the robot geoms.
+        n_env = len(layout.env)
+        geoms = np.concatenate([layout.env, layout.robot])
+        radius = np.asarray(model.geom_rbound[geoms], dtype=float)
+        plane = np.asarray(model.geom_type[geoms] == int(mujoco.mjtGeom.mjGEOM_PLANE))
+        dp, dm = np.diff(xpos, axis=0), np.diff(xmat, axis=0)
+        step = np.sqrt(np.einsum("kgi,kgi->kg", dp, dp)) + radius * np.sqrt(np.einsum("kgi,kgi->kg", dm, dm))
+        step = np.where(plane & (step > 0.0), np.inf, step)
+        cum = np.concatenate([np.zeros((1, len(geoms))), np.cumsum(step, axis=0)])
+        self.cum_e, self.cum_r = cum[:, :n_env], cum[:, n_env:]
+        self.sphere = _sphere_box_bounds(model, layout, xpos[:, n_env:], xpos[:, :n_env], xmat[:, :n_env])
         self.slack = slack
-        self.cum_r = np.zeros(len(self.robot))
-        self.cum_e = np.zeros(len(self.env))
-        shape = (len(self.env), len(self.robot))
+        shape = (n_env, len(layout.robot))
         self.last = np.full(shape, -np.inf)  # distance at the pair's last coal query
         self.last_r = np.zeros(shape)  # cum_r of its robot geom then
         self.last_e = np.zeros(shape)  # cum_e of its environment geom then
-        self._pose: tuple[FloatArray, FloatArray, FloatArray, FloatArray] | None = None
-
-    def advance(self, data: mujoco.MjData) -> None:
-        """Add the travel from the previous knot to ``data``'s (its kinematics current)."""
-        pos_r, rot_r = data.geom_xpos[self.robot].copy(), data.geom_xmat[self.robot].copy()
-        pos_e, rot_e = data.geom_xpos[self.env].copy(), data.geom_xmat[self.env].copy()
-        if self._pose is not None:
-            p_r, m_r, p_e, m_e = self._pose
-            self.cum_r += self._travel(pos_r - p_r, rot_r - m_r, self.radius_r, self.unbounded_r)
-            self.cum_e += self._travel(pos_e - p_e, rot_e - m_e, self.radius_e, self.unbounded_e)
-        self._pose = (pos_r, rot_r, pos_e, rot_e)
-
-    @staticmethod
-    def _travel(
-        dp: FloatArray, dm: FloatArray, radius: FloatArray, unbounded: NDArray[np.bool_]
-    ) -> FloatArray:
-        step = np.sqrt(np.einsum("ij,ij->i", dp, dp)) + radius * np.sqrt(np.einsum("ij,ij->i", dm, dm))
-        return np.asarray(np.where(unbounded & (step > 0.0), np.inf, step), dtype=float)
+        self.k = 0
 
     def bounds(self) -> FloatArray:
-        """(E, R) lower bounds on every pair's distance at the current knot (-inf: never queried)."""
-        travel = (self.cum_r[None, :] - self.last_r) + (self.cum_e[:, None] - self.last_e)
-        return np.asarray(self.last - travel - self.slack, dtype=float)
+        """(E, R) lower bounds on every pair's distance at knot ``self.k``."""
+        k = self.k
+        travel = (self.cum_r[k][None, :] - self.last_r) + (self.cum_e[k][:, None] - self.last_e)
+        return np.maximum(self.sphere[k], self.last - travel - self.slack)
 
     def record(self, ei: int, ri: int, distance: float) -> None:
         self.last[ei, ri] = distance
-        self.last_r[ei, ri] = self.cum_r[ri]
-        self.last_e[ei, ri] = self.cum_e[ei]
+        self.last_r[ei, ri] = self.cum_r[self.k, ri]
+        self.last_e[ei, ri] = self.cum_e[self.k, ei]
+
+
+def _sphere_box_bounds(
+    model: mujoco.MjModel, layout: _Layout, centres: FloatArray, pos: FloatArray, rot: FloatArray
+) -> FloatArray:
+    """(..., E, R) lower bounds: robot bounding spheres (centres (..., R, 3)) vs environment oriented
+    boxes (``geom_aabb`` in frames pos (..., E, 3), rot (..., E, 9), world = rot @ local)."""
+    rot = rot.reshape(*rot.shape[:-1], 3, 3)
+    rel = centres[..., None, :, :] - pos[..., :, None, :]  # (..., E, R, 3)
+    local = np.einsum("...eij,...eri->...erj", rot, rel)
+    aabb = model.geom_aabb[layout.env]  # (E, 6): centre, half sizes in the geom frame
+    outside = np.maximum(np.abs(local - aabb[:, None, :3]) - aabb[:, None, 3:], 0.0)
+    gap = np.sqrt(np.einsum("...j,...j->...", outside, outside)) - model.geom_rbound[layout.robot]
+    return np.asarray(gap, dtype=float)
 
 
 class CollisionModel:
@@ -552,27 +557,33 @@ class CollisionModel:
         qpos = np.asarray(trajectory.qpos, dtype=float)
         data = self._data
         knots = []
-        # Along a trajectory, a pair's last coal distance less the travel since bounds it too.
-        travel = _TravelBound(self.model, layout) if broad_phase else None
-        for row in qpos:
+        travel = None
+        if broad_phase and len(qpos):
+            # First pass: every knot's geom poses, for the bounds of all knots at once.
+            geoms = np.concatenate([layout.env, layout.robot])
+            xpos, xmat = np.empty((len(qpos), len(geoms), 3)), np.empty((len(qpos), len(geoms), 9))
+            for k, row in enumerate(qpos):
+                data.qpos[:] = row
+                mujoco.mj_kinematics(self.model, data)
+                xpos[k], xmat[k] = data.geom_xpos[geoms], data.geom_xmat[geoms]
+            travel = _TravelBound(self.model, layout, xpos, xmat)
+        for k, row in enumerate(qpos):
             data.qpos[:] = row
             mujoco.mj_kinematics(self.model, data)
             if travel is not None:
-                travel.advance(data)
+                travel.k = k
             knots.append(self._knot_from_data(data, layout, broad_phase, travel))
         return CollisionProfile(np.asarray(trajectory.times, dtype=float), tuple(knots))
 
     def _lower_bounds(self, data: mujoco.MjData, layout: _Layout) -> FloatArray:
         """(E, R) broad-phase lower bounds: robot bounding sphere vs environment oriented box."""
-        model = self.model
-        centres = data.geom_xpos[layout.robot]  # (R, 3)
-        pos = data.geom_xpos[layout.env]  # (E, 3)
-        rot = data.geom_xmat[layout.env].reshape(-1, 3, 3)  # world = rot @ local
-        local = np.einsum("eij,eri->erj", rot, centres[None, :, :] - pos[:, None, :])
-        aabb = model.geom_aabb[layout.env]  # (E, 6): centre, half sizes in the geom frame
-        outside = np.maximum(np.abs(local - aabb[:, None, :3]) - aabb[:, None, 3:], 0.0)
-        gap = np.sqrt(np.einsum("erj,erj->er", outside, outside)) - model.geom_rbound[layout.robot][None, :]
-        return np.asarray(gap, dtype=float)
+        return _sphere_box_bounds(
+            self.model,
+            layout,
+            data.geom_xpos[layout.robot],
+            data.geom_xpos[layout.env],
+            data.geom_xmat[layout.env],
+        )
 
     def _place(self, data: mujoco.MjData, geom: int) -> None:
         """Copy ``geom``'s world pose from ``data`` into its coal transform."""
@@ -601,9 +612,7 @@ class CollisionModel:
         if n_pairs == 0:
             raise CollisionModelError("no robot-environment pair is left to check (all allowed)")
         if broad_phase:
-            lower = self._lower_bounds(data, layout)
-            if travel is not None:
-                lower = np.maximum(lower, travel.bounds())
+            lower = travel.bounds() if travel is not None else self._lower_bounds(data, layout)
             bounds = np.where(layout.mask, lower, np.inf)
             first = bounds <= layout.cutoff[:, None]
         else:
