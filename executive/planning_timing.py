@@ -214,7 +214,7 @@ def build_trajectory(
     for _ in range(cfg.zmp_retime_rounds):
         times, s_knots = retime(float(s_path[-1]), ratio, cfg.knot_spacing, cfg.max_knots, duration)
         qpos = interpolate_path(path, s_path, s_knots, frames.quat_adr)
-        com = _com_path(model, data, qpos, relative, frames.base_body)
+        com, attached, hand_xyz = _com_path(model, data, qpos, relative, frames)
         zmp = zmp_path(times, com)
         worst_zmp = min(polygon.margin(p) for p in zmp)
         # A CoM held near the edge cannot have its ZMP further in than itself: then ask for less.
@@ -233,19 +233,15 @@ def build_trajectory(
             f"motion '{name}': the zero-moment point comes {worst_zmp:.4f} m from the support polygon's "
             f"edge even at {times[-1]:.1f} s (needs {needed:.3f} m)",
         )
-    hands = {s: np.empty((len(times), 3)) for s in frames.hand_sites}
+    # The last round's knots, a carried object re-attached to its hand (as _com_path left them).
+    qpos = attached
+    hands = {s: hand_xyz[:, i].copy() for i, s in enumerate(frames.hand_sites)}
     floor = np.asarray(floor, dtype=float) - cfg.clearance_tolerance
     # Pairs whose bounding spheres stay farther apart than every floor cannot break one: not asked.
     cutoff = float(np.max(floor)) if len(floor) else 0.0
     for k in range(len(times)):
         data.qpos[:] = qpos[k]
         mujoco.mj_kinematics(model, data)
-        if relative is not None:
-            attach_object(data, relative)
-            qpos[k] = data.qpos
-            mujoco.mj_kinematics(model, data)
-        for s, site in frames.hand_sites.items():
-            hands[s][k] = data.site_xpos[site]
         gaps = collisions.distances(data, cutoff) - floor
         if np.any(gaps < 0):
             i = int(np.argmin(gaps))
@@ -275,19 +271,25 @@ def build_trajectory(
 
 
 def _com_path(
-    model: mujoco.MjModel, data: mujoco.MjData, qpos: FloatArray, relative: Relative | None, base_body: int
-) -> FloatArray:
-    """Whole-robot CoM at every knot (a carried object re-attached to its hand first)."""
+    model: mujoco.MjModel, data: mujoco.MjData, qpos: FloatArray, relative: Relative | None, frames: Frames
+) -> tuple[FloatArray, FloatArray, FloatArray]:
+    """Per knot, a carried object re-attached to its hand first: the whole-robot CoM (K, 3), the
+    knots' qpos with the object attached (K, nq) and the hand sites' positions (K, sides, 3)."""
     com = np.empty((len(qpos), 3))
+    attached = np.array(qpos, dtype=float)
+    sites = list(frames.hand_sites.values())
+    hands = np.empty((len(qpos), len(sites), 3))
     for k, q in enumerate(qpos):
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
         if relative is not None:
             attach_object(data, relative)
+            attached[k] = data.qpos
             mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
-        com[k] = data.subtree_com[base_body]
-    return com
+        com[k] = data.subtree_com[frames.base_body]
+        hands[k] = data.site_xpos[sites]
+    return com, attached, hands
 
 
 def zmp_path(times: FloatArray, com: FloatArray, window: float = 0.1, gravity: float = 9.81) -> FloatArray:
