@@ -659,8 +659,9 @@ class CollisionModel:
             # Pairs beyond the cutoff, nearest bound first, until no bound is below the best.
             rest = np.where(first, np.inf, bounds)
             flat = rest.reshape(-1)
-            for idx in np.argsort(flat).tolist():
-                if flat[idx] >= best:  # inf included: the pair is excluded or already visited
+            below = np.flatnonzero(flat < best)  # best only falls: no other pair can beat it
+            for idx in below[np.argsort(flat[below], kind="stable")].tolist():
+                if flat[idx] >= best:  # the pair is excluded or already visited
                     break
                 ei, ri = divmod(idx, rest.shape[1])
                 if not placed_e[ei]:
