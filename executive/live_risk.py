@@ -17,15 +17,19 @@ contact does not trip the guard.
 
 Cost per tick
 -------------
-The distance at the measured configuration is computed on every check. A planned
+The distance at the measured configuration is re-evaluated on every check: exactly, or
+by a certified lower bound from the last exact one and how far each moving geom has
+moved since (:meth:`LiveRiskMonitor._now_distance`), used only when it clears the limit,
+so the guard trips exactly when the exact distance would make it trip. A planned
 knot's distance is a function of the knot (its full qpos, objects included), the
 carried object, the allowances and the estimate's geometry only, so it is
 memoised per planned trajectory, and dropped as a whole when the estimate's
 geometry changes (``body_pos``, ``body_quat``, ``geom_pos``, ``geom_quat``,
 ``geom_size`` of the model, compared on every check). A moved obstacle therefore
-reaches every look-ahead knot on the very next check. :meth:`LiveRiskMonitor.prepare`
-fills the memo for a whole trajectory ahead of time (the selector calls it in its
-planning thread), so a tick only computes the measured configuration's distance.
+reaches every look-ahead knot on the very next check (and forces an exact distance now).
+:meth:`LiveRiskMonitor.prepare` fills the memo for a whole trajectory ahead of time (the
+selector calls it in its planning thread), so a tick computes at most the measured
+configuration's distance.
 The CoM margin picks the foot contacts out in one pass (:func:`contact_support_margin`);
 a CoM clearly inside the support is measured without building the hull
 (:func:`interior_margin`, exact), anything else by the fall model's hull and margin
@@ -51,6 +55,20 @@ __all__ = ["GuardVerdict", "LiveRiskMonitor", "contact_support_margin", "interio
 
 FloatArray = NDArray[np.float64]
 _TRACK_LIMIT = 512  # trajectories memoised; beyond, the memo starts afresh
+
+
+@dataclass(frozen=True)
+class _NowReference:
+    """The last exact distance at a measured configuration, and where the moving geoms were."""
+
+    distance: float
+    robot_body: str
+    env_body: str
+    geoms: NDArray[np.intp]  # the robot side first, then the environment's moving geoms
+    n_robot: int
+    pos: FloatArray  # (G, 3) geom_xpos then
+    rot: FloatArray  # (G, 9) geom_xmat then
+    radius: FloatArray  # (G,) geom_rbound
 
 
 class _Track:
@@ -148,7 +166,9 @@ class GuardVerdict:
 
     ok: bool
     reason: str
-    min_distance: float  # least predicted robot-environment distance (m)
+    # least predicted robot-environment distance (m); its part "now" is a certified lower
+    # bound (never above the true distance) when that bound already clears the limit
+    min_distance: float
     at_s: float  # trajectory time of that distance (s)
     robot_body: str
     env_body: str
@@ -187,6 +207,15 @@ class LiveRiskMonitor:
         self._tracks: dict[tuple[int, str | None, frozenset[tuple[str, str]]], _Track] = {}
         self._geometry = self._geometry_key()
         self.knots_computed = 0  # planned knots whose distance was computed (not memoised)
+        # The measured configuration's distance: the last exact one per (carried, allow), with
+        # the poses of the geoms that move with the configuration (robot, objects) at that time.
+        model = self.collision.model
+        self._kinematics = mujoco.MjData(model)
+        self._robot_geoms = np.array(estimate.ids.robot_geoms, dtype=np.intp)
+        self._object_geom = {name: int(g) for name, g in estimate.ids.object_geoms.items()}
+        self._now: dict[tuple[str | None, frozenset[tuple[str, str]]], _NowReference] = {}
+        self.now_exact = 0  # checks that computed the measured configuration's distance exactly
+        self.now_bounded = 0  # checks that a certified lower bound answered (it cleared the limit)
 
     def _geometry_key(self) -> bytes:
         """What a knot's distance depends on besides the knot: the estimate's geometry."""
@@ -198,6 +227,7 @@ class LiveRiskMonitor:
         key = self._geometry_key()
         if key != self._geometry or len(self._tracks) > _TRACK_LIMIT:
             self._tracks.clear()
+            self._now.clear()
             self._geometry = key
 
     def _track(self, qpos: FloatArray, carried: str | None, allow: frozenset[tuple[str, str]]) -> _Track:
@@ -239,6 +269,63 @@ class LiveRiskMonitor:
             q[idx] = planned_qpos[idx]
         return q
 
+    def _movers(self, carried: str | None) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
+        """Geoms that move with the configuration: the robot's side (its geoms and the carried
+        object's) and the environment's (the other objects); the table and obstacles do not."""
+        robot = self._robot_geoms
+        if carried is not None and carried in self._object_geom:
+            robot = np.append(robot, self._object_geom[carried])
+        env = np.array([g for name, g in self._object_geom.items() if name != carried], dtype=np.intp)
+        return robot, env
+
+    def _now_distance(
+        self, now: FloatArray, carried: str | None, allow: frozenset[tuple[str, str]], at_least: float | None
+    ) -> tuple[float, str, str]:
+        """Distance at the measured configuration ``now`` (caller holds the lock and has refreshed).
+
+        Exact, or, when ``at_least`` is given, possibly a certified lower bound that is at least
+        ``at_least``: every point of a geom moves by at most ``|dc| + |dR|_F r`` (centre shift,
+        change of its rotation matrix, bounding radius ``geom_rbound``) from where it was at the
+        last exact computation, so the distance of any (robot side, environment) pair dropped by
+        at most the largest such move of the robot side plus that of the environment's moving
+        geoms. If that bound still clears ``at_least``, the true distance does too; otherwise
+        the distance is computed exactly. A limit test on the result therefore decides exactly
+        as a test on the exact distance would.
+        """
+        key = (carried, allow)
+        ref = self._now.get(key)
+        if at_least is not None and ref is not None:
+            model, data = self.collision.model, self._kinematics
+            data.qpos[:] = now
+            mujoco.mj_kinematics(model, data)
+            move = np.linalg.norm(data.geom_xpos[ref.geoms] - ref.pos, axis=1)
+            move += np.linalg.norm(data.geom_xmat[ref.geoms] - ref.rot, axis=1) * ref.radius
+            bound = ref.distance - float(move[: ref.n_robot].max())
+            if ref.n_robot < len(move):
+                bound -= float(move[ref.n_robot :].max())
+            if bound >= at_least:
+                self.now_bounded += 1
+                return bound, ref.robot_body, ref.env_body
+        knot = self.collision.knot(now, carried=carried, allow=allow)
+        self.now_exact += 1
+        if at_least is not None:
+            robot, env = self._movers(carried)
+            geoms = np.concatenate([robot, env])
+            data = self._kinematics
+            data.qpos[:] = now
+            mujoco.mj_kinematics(self.collision.model, data)
+            self._now[key] = _NowReference(
+                distance=float(knot.distance),
+                robot_body=knot.robot_body_name,
+                env_body=knot.env_body_name,
+                geoms=geoms,
+                n_robot=len(robot),
+                pos=data.geom_xpos[geoms].copy(),
+                rot=data.geom_xmat[geoms].copy(),
+                radius=self.collision.model.geom_rbound[geoms].copy(),
+            )
+        return float(knot.distance), knot.robot_body_name, knot.env_body_name
+
     def clearance(
         self,
         measured_qpos: FloatArray,
@@ -248,16 +335,21 @@ class LiveRiskMonitor:
         *,
         carried: str | None,
         allow: frozenset[tuple[str, str]],
+        at_least: float | None = None,
     ) -> tuple[float, float, str, str]:
-        """Least distance now and at the planned knots in (t, t + lookahead]: (d, time, robot, env)."""
+        """Least distance now and at the planned knots in (t, t + lookahead]: (d, time, robot, env).
+
+        ``at_least``: the distance now may be a certified lower bound, if that bound is at least
+        this (see :meth:`_now_distance`); None: always exact.
+        """
         times = np.asarray(trajectory_times, dtype=float)
         qpos = np.asarray(trajectory_qpos, dtype=float)
         k_now = min(max(int(np.searchsorted(times, t)), 0), len(times) - 1)
         now = self.configuration(measured_qpos, qpos[k_now])
         with self._lock:
             self._refresh()
-            best = self.collision.knot(now, carried=carried, allow=allow)
-            out = (best.distance, t, best.robot_body_name, best.env_body_name)
+            d_now, robot_body, env_body = self._now_distance(now, carried, allow, at_least)
+            out = (d_now, t, robot_body, env_body)
             lo = int(np.searchsorted(times, t, side="right"))
             hi = int(np.searchsorted(times, t + self.config.lookahead_s, side="right"))
             if hi > lo:
@@ -291,10 +383,16 @@ class LiveRiskMonitor:
         com_margin: float | None,
     ) -> GuardVerdict:
         """Both checks against the limits; the first limit crossed is the reason."""
-        d, at, robot_body, env_body = self.clearance(
-            measured_qpos, trajectory_qpos, trajectory_times, t, carried=carried, allow=allow
-        )
         cfg = self.config
+        d, at, robot_body, env_body = self.clearance(
+            measured_qpos,
+            trajectory_qpos,
+            trajectory_times,
+            t,
+            carried=carried,
+            allow=allow,
+            at_least=cfg.min_distance,
+        )
         reason = ""
         if d < cfg.min_distance:
             when = "now" if at <= t else f"in {at - t:.2f} s"

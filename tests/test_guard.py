@@ -136,13 +136,18 @@ def test_guard_stays_quiet_on_an_undisturbed_run(plan: AlternativePlan) -> None:
 
 
 def _window_reference(
-    estimate: World, traj: object, measured: np.ndarray, t: float, allow: frozenset[tuple[str, str]]
+    estimate: World,
+    traj: object,
+    measured: np.ndarray,
+    t: float,
+    allow: frozenset[tuple[str, str]],
+    model: object = None,
 ) -> float:
-    """The least distance now and over the look-ahead, every knot computed afresh by a new
-    collision model of the estimate as it is now (no memo anywhere)."""
+    """The least distance now and over the look-ahead, every knot computed afresh by a collision
+    model of the estimate as it is now (a new one unless given; no memo anywhere)."""
     from executive.risk.collision import CollisionModel
 
-    model = CollisionModel(estimate, estimate.scenario.risk)
+    model = model or CollisionModel(estimate, estimate.scenario.risk)
     times, qpos = traj.times, traj.qpos  # type: ignore[attr-defined]
     carried = traj.carried[1] if traj.carried else None  # type: ignore[attr-defined]
     lookahead = estimate.scenario.risk.guard.lookahead_s
@@ -150,9 +155,9 @@ def _window_reference(
     now = measured.copy()
     for adr in estimate.ids.object_qpos.values():
         now[adr : adr + 7] = qpos[k_now][adr : adr + 7]
-    best = model.knot(now, carried=carried, allow=allow).distance
+    best = model.knot(now, carried=carried, allow=allow).distance  # type: ignore[attr-defined]
     for k in np.nonzero((times > t) & (times <= t + lookahead))[0]:
-        best = min(best, model.knot(qpos[k], carried=carried, allow=allow).distance)
+        best = min(best, model.knot(qpos[k], carried=carried, allow=allow).distance)  # type: ignore[attr-defined]
     return float(best)
 
 
@@ -185,6 +190,49 @@ def test_memoised_look_ahead_equals_a_fresh_computation_and_follows_a_moved_obst
     assert d == pytest.approx(_window_reference(estimate, traj, measured, t, allow), abs=1e-9)
     print(f"look-ahead clearance {before * 1000:.1f} mm, {d * 1000:.1f} mm to {env} after the move")
     assert env == "book_stack" and d < before
+
+
+def test_a_bounded_distance_now_decides_as_the_exact_one(plan: AlternativePlan) -> None:
+    """Along the carry, with tracking error, and with the stack moved into the lane halfway: each
+    check's clearance is the exact one, or a lower bound of it that clears the limit; so the
+    verdicts are those of the exact distance. Most checks away from the stack need no exact
+    distance now."""
+    from executive.risk.collision import CollisionModel
+
+    scenario = load("book_transfer")
+    estimate = build(scenario)
+    limit = scenario.risk.guard.min_distance
+    monitor = LiveRiskMonitor(estimate, scenario.risk.guard)
+    traj = plan.trajectories["left.transfer"]
+    carried = traj.carried[1] if traj.carried else None
+    allow = monitor.collision.step_allow("left", "carry", "book", (), traj.carried)
+    reference = CollisionModel(estimate, scenario.risk)
+    rng = np.random.default_rng(1)
+    error = np.zeros(estimate.model.nq)
+    bounded = exact_trips = 0
+    for i, t in enumerate(np.arange(0.0, traj.duration, 0.02)):
+        if i == 40:
+            _move_stack(estimate, SHIFT)
+            reference = CollisionModel(estimate, scenario.risk)
+        error[7:] = 0.9 * error[7:] + rng.normal(0.0, 0.002, len(error) - 7)  # smooth tracking error
+        measured = traj.sample(t) + error
+        before = monitor.now_bounded
+        d = monitor.clearance(
+            measured, traj.qpos, traj.times, t, carried=carried, allow=allow, at_least=limit
+        )[0]
+        exact = _window_reference(estimate, traj, measured, t, allow, reference)
+        if monitor.now_bounded > before:
+            bounded += 1
+            # never above the exact value; below it only where both clear the limit
+            assert d <= exact + 1e-12
+            assert d == pytest.approx(exact, abs=1e-9) or d >= limit
+        else:
+            assert d == pytest.approx(exact, abs=1e-9)
+        assert (d < limit) == (exact < limit)
+        exact_trips += exact < limit
+    print(f"{bounded} of {i + 1} checks bounded, {monitor.now_exact} exact; {exact_trips} below the limit")
+    assert bounded > (i + 1) // 2
+    assert exact_trips > 0  # the moved stack does come within the limit
 
 
 def test_interior_margin_equals_the_polygon_modules_margin() -> None:
