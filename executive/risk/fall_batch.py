@@ -82,10 +82,10 @@ def hulls(points: FloatArray, on_ground: NDArray[np.bool_]) -> KnotPolygons:
 
     Raises ValueError (naming the knot) when a knot's points span no polygon.
     """
-    count = len(points)
-    vertices: list[FloatArray | None] = [None] * count
-    for mask in np.unique(on_ground, axis=0):
-        knots = np.flatnonzero(np.all(on_ground == mask, axis=1))
+    parts: dict[int, list[tuple[NDArray[np.int_], FloatArray]]] = {}
+    masks, which = np.unique(on_ground, axis=0, return_inverse=True)
+    for m, mask in enumerate(masks):
+        knots = np.flatnonzero(which.reshape(-1) == m)
         pts = points[knots][:, mask]  # (n, P', 2)
         todo = np.ones(len(knots), dtype=bool)
         while np.any(todo):
@@ -99,20 +99,15 @@ def hulls(points: FloatArray, on_ground: NDArray[np.bool_]) -> KnotPolygons:
             rest = np.flatnonzero(todo)
             good = rest[_valid_hull(pts[rest], idx)]
             good = np.union1d(good, [first]).astype(int)
-            for j in good.tolist():
-                vertices[int(knots[j])] = pts[j, idx]
+            parts.setdefault(len(idx), []).append((knots[good], pts[good][:, idx]))
             todo[good] = False
-    groups: dict[int, list[int]] = {}
-    for k, v in enumerate(vertices):
-        if v is None:  # pragma: no cover - every knot is assigned above
-            raise ValueError(f"no polygon for knot {k}")
-        groups.setdefault(len(v), []).append(k)
-    return KnotPolygons(
-        {
-            m: (np.array(ks, dtype=int), np.stack([vertices[k] for k in ks]))  # type: ignore[misc]
-            for m, ks in groups.items()
-        }
-    )
+    groups = {}
+    for size, chunks in parts.items():
+        knots = np.concatenate([k for k, _ in chunks])
+        verts = np.concatenate([v for _, v in chunks])
+        order = np.argsort(knots, kind="stable")
+        groups[size] = (knots[order], verts[order])
+    return KnotPolygons(groups)
 
 
 def halfplanes_batch(v: FloatArray) -> tuple[FloatArray, FloatArray]:
