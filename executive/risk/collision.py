@@ -324,7 +324,8 @@ class _TravelBound:
         step = np.where(plane & (step > 0.0), np.inf, step)
         cum = np.concatenate([np.zeros((1, len(geoms))), np.cumsum(step, axis=0)])
         self.cum_e, self.cum_r = cum[:, :n_env], cum[:, n_env:]
-        self.sphere = _sphere_box_bounds(model, layout, xpos[:, n_env:], xpos[:, :n_env], xmat[:, :n_env])
+        sphere = _sphere_box_bounds(model, layout, xpos[:, n_env:], xpos[:, :n_env], xmat[:, :n_env])
+        self.sphere = np.where(layout.mask, sphere, np.inf)  # excluded pairs: never a candidate
         self.slack = slack
         shape = (n_env, len(layout.robot))
         self.last = np.full(shape, -np.inf)  # distance at the pair's last coal query
@@ -333,10 +334,11 @@ class _TravelBound:
         self.k = 0
 
     def bounds(self) -> FloatArray:
-        """(E, R) lower bounds on every pair's distance at knot ``self.k``."""
+        """(E, R) lower bounds on every pair's distance at knot ``self.k`` (inf: pair excluded)."""
         k = self.k
         travel = (self.cum_r[k][None, :] - self.last_r) + (self.cum_e[k][:, None] - self.last_e)
-        return np.maximum(self.sphere[k], self.last - travel - self.slack)
+        # fmax: a NaN (an unbounded travel less itself) leaves the broad-phase bound.
+        return np.fmax(self.sphere[k], self.last - travel - self.slack)
 
     def record(self, ei: int, ri: int, distance: float) -> None:
         self.last[ei, ri] = distance
@@ -612,8 +614,10 @@ class CollisionModel:
         if n_pairs == 0:
             raise CollisionModelError("no robot-environment pair is left to check (all allowed)")
         if broad_phase:
-            lower = travel.bounds() if travel is not None else self._lower_bounds(data, layout)
-            bounds = np.where(layout.mask, lower, np.inf)
+            if travel is not None:
+                bounds = travel.bounds()  # excluded pairs already at inf
+            else:
+                bounds = np.where(layout.mask, self._lower_bounds(data, layout), np.inf)
             first = bounds <= layout.cutoff[:, None]
         else:
             bounds = np.where(layout.mask, -np.inf, np.inf)

@@ -10,6 +10,7 @@ knots an exact 2-D Gaussian integral per body (polar form; Craig 1991 for one ha
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Mapping, Sequence
 from typing import NamedTuple
@@ -41,6 +42,17 @@ class CollisionModelError(ExecutiveError):
 # --- first-order probability ---------------------------------------------------------------------
 
 
+@functools.cache
+def _cos_table(n_angles: int) -> FloatArray:
+    """cos(theta_j - a_b) for every direction bin b (rows) and quadrature angle theta_j (columns),
+    computed once: events only take the bins' directions."""
+    angle = np.arange(_N_BINS) * (2.0 * math.pi / _N_BINS)
+    theta = (np.arange(n_angles) + 0.5) * (2.0 * math.pi / n_angles)
+    table = np.cos(theta[None, :] - angle[:, None])
+    table.flags.writeable = False
+    return table
+
+
 def _union_by_group(
     group: NDArray[np.int_], phi: FloatArray, h: FloatArray, n_groups: int, n_angles: int
 ) -> FloatArray:
@@ -62,9 +74,7 @@ def _union_by_group(
     keep = np.ones(len(g), dtype=bool)
     keep[1:] = (g[1:] != g[:-1]) | (bn[1:] != bn[:-1])
     g, hh = g[keep], hh[keep]
-    angle = bn[keep] * (2.0 * math.pi / _N_BINS)
-    theta = (np.arange(n_angles) + 0.5) * (2.0 * math.pi / n_angles)
-    cos = np.cos(theta[None, :] - angle[:, None])  # (N, M)
+    cos = _cos_table(n_angles)[bn[keep]]  # (N, M): cos(theta_j - angle of the event's bin)
     reach = np.full(cos.shape, np.inf)
     np.divide(hh[:, None], cos, out=reach, where=cos > 0.0)
     starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
