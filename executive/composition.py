@@ -14,8 +14,9 @@ hands fit side by side. Of the two ways to close across the object, a hand
 takes the one nearer its profile's ``closing_yaw`` (a hand with a thumb on one
 side, such as the G1's Dex3), else the one nearer its home pose's.
 
-After placing, a hand goes home keeping clear of the object it placed; a hand
-that placed across the body first goes back along the lane to its own side.
+After placing, a hand goes home keeping clear of the object it placed; on a
+robot whose profile sets ``return_along_lane``, a hand that placed across the
+body first goes back along the lane to its own side.
 """
 
 from __future__ import annotations
@@ -212,7 +213,7 @@ def transfer_steps(
         # home from across the body swings the arm across the body's front while the hand turns,
         # and the IK may bring it home in another arm configuration, with the waist still bent.
         go_back: list[Step] = []
-        if side_of_body(place) != side_of_body(home[s].position):
+        if world.profile.return_along_lane and side_of_body(place) != side_of_body(home[s].position):
             back_point = np.array([lane_x, home[s].position[1], carry_z])
             go_back.append(Step("move", f"{s}.back", s, (target(s, back_point, place_yaw, yaw),)))
         return [

@@ -342,6 +342,12 @@ class Node:
             self.expected(f"an integer >= {ge}")
         return value
 
+    def boolean(self) -> bool:
+        """true or false (not 0/1, not a string)."""
+        if not isinstance(self.value, bool):
+            self.expected("true or false")
+        return self.value
+
     def string(self, *, allow_empty: bool = False) -> str:
         """A string (non-empty unless ``allow_empty``)."""
         if not isinstance(self.value, str):

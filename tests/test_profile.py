@@ -61,6 +61,7 @@ def test_g1_profile_schema() -> None:
     assert (p.arms["left"].hand.closing_yaw_deg, p.arms["right"].hand.closing_yaw_deg) == (-90.0, 90.0)
     assert p.home_joints == {"left_shoulder_roll_joint": 0.4, "right_shoulder_roll_joint": -0.4}
     assert load_bundled_profile("humanoid").arms["left"].hand.closing_yaw_deg is None
+    assert p.return_along_lane and not load_bundled_profile("humanoid").return_along_lane
     assert load_bundled_profile("humanoid").home_joints == {}
 
 
@@ -176,6 +177,7 @@ PROFILE_CASES: list[tuple[str, Callable[[Doc], Doc], str, str]] = [
         "home_joints.left_shoulder1",
         "expected a number, got str",
     ),
+    ("return-along-lane-int", put("return_along_lane", 1), "return_along_lane", "expected true or false"),
 ]
 
 

@@ -136,4 +136,4 @@ def test_quantile_groups_keep_ties_together_and_cover_every_trial() -> None:
     assert sorted(int(i) for g in groups for i in g) == list(range(8))
     values = [sorted({p[i] for i in g}) for g in groups]
     assert values[0] == [0.01]  # the four equal values stay in one group
-    assert all(max(a) <= min(b) for a, b in zip(values, values[1:], strict=False))
+    assert all(max(a) <= min(b) for a, b in itertools.pairwise(values))

@@ -9,6 +9,7 @@ The schema by example is ``scenarios/robots/humanoid/profile.yaml``::
     head_body: head               # optional (null: no head)
     keyframe: stand
     home_joints: {name: angle}    # optional; rad, replacing the keyframe's angles of these joints
+    return_along_lane: false      # optional; a hand that placed across the body goes back first
     waist_joints: [...]
     legs: {left: [...], right: [...]}
     feet: {left: {body: ..., geoms: [...]}, right: {...}}      # geoms optional
@@ -42,7 +43,7 @@ __all__ = ["SIDES", "load_bundled_profile", "load_profile", "loads_profile", "pr
 SIDES: tuple[str, ...] = ("left", "right")
 
 _TOP_REQUIRED = ("name", "base_body", "torso_body", "keyframe", "waist_joints", "legs", "feet", "arms")
-_TOP_OPTIONAL = ("mjcf", "head_body", "home_joints")
+_TOP_OPTIONAL = ("mjcf", "head_body", "home_joints", "return_along_lane")
 
 
 def load_profile(path: Path) -> RobotProfile:
@@ -82,6 +83,8 @@ def profile_from_node(root: Node, base_dir: Path, source_path: Path | None = Non
     keyframe = root.get("keyframe").string()
     home_node = root.opt("home_joints")
     home_joints = {name: node.number() for name, node in home_node.items()} if home_node is not None else {}
+    lane_node = root.opt("return_along_lane")
+    return_along_lane = lane_node.boolean() if lane_node is not None else False
     waist_joints = root.get("waist_joints").strings()
     leg_joints = {side: node.strings(min_len=1) for side, node in _sides(root.get("legs"))}
     feet = {side: _foot(node) for side, node in _sides(root.get("feet"))}
@@ -99,6 +102,7 @@ def profile_from_node(root: Node, base_dir: Path, source_path: Path | None = Non
         mjcf=mjcf,
         source=source_path,
         home_joints=home_joints,
+        return_along_lane=return_along_lane,
     )
     _check_unique_joints(root, profile)
     return profile

@@ -78,6 +78,11 @@ class RobotProfile:
     # Joint angles (rad) that replace the keyframe's in the home pose, e.g. arms held a little
     # further out so that open hands keep clear of the body.
     home_joints: dict[str, float] = field(default_factory=dict)
+    # After placing across the body, go back along the carry lane to the hand's own side before
+    # turning home (the G1: its straight way home from across the body ends in another arm
+    # configuration with the waist bent). Off by default: on the bundled humanoid that extra
+    # reach unloads a foot (the live guard measures the CoM 73 mm outside the foot contacts).
+    return_along_lane: bool = False
 
     @property
     def sides(self) -> tuple[str, ...]:
