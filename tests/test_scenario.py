@@ -10,7 +10,7 @@ import pytest
 import yaml
 
 from executive import registry, scenario
-from executive.scenario_types import RiskConfig, Scenario, TrialsConfig, Uncertainty
+from executive.scenario_types import RiskConfig, Scenario, SceneVariation, TrialsConfig, Uncertainty
 
 
 def bundled_dict() -> dict:
@@ -61,7 +61,13 @@ def test_bundled_book_transfer_values() -> None:
     assert task.to == (0.52, -0.26, None)
     assert task.to_yaw_rad is None
     assert task.alternatives == ("left", "right", "left_to_right")
-    assert s.trials == TrialsConfig(count=10, seed=0)
+    assert s.trials == TrialsConfig(
+        count=10,
+        seed=0,
+        scene_variation=SceneVariation(
+            object_position=0.01, object_yaw_rad=math.radians(3.0), obstacle_position=0.01
+        ),
+    )
 
 
 @pytest.mark.parametrize("name", registry.list_scenarios())
