@@ -25,6 +25,7 @@ from executive.risk.collision import (
     gaussian_union_probability,
     instantaneous_risk,
     monte_carlo_collision_probability,
+    report_from_profile,
     seed_collision_score,
 )
 from executive.risk.shapes import coal_geometry, coal_transform
@@ -350,3 +351,33 @@ def test_hand_factor_and_carried_object(world: World, cmodel: CollisionModel) ->
     assert (lifted.robot_geom_name, lifted.env_geom_name) == ("book", "book_stack")
     assert lifted.distance == pytest.approx(0.01, abs=1e-9)
     assert cmodel.body_part(lifted.robot_geom) == ("other", 1.0)
+
+
+@pytest.mark.slow
+def test_a_carried_object_keeps_its_own_pose_error_first_order_matches_monte_carlo() -> None:
+    """The book carried past the stack: both the stack's and the book's own 1 cm errors count.
+
+    Reference: Monte Carlo with exact coal distances, the stack and the carried book each
+    shifted by their own draw per sample. With the stack's error alone the first-order value
+    would be far smaller (sigma 1 cm instead of 1.41 cm on the same clearance).
+    """
+    from executive.composition import plan_alternative
+    from executive.planning import Planner
+
+    scenario = load("book_transfer")
+    world = build(scenario)
+    plan = plan_alternative(Planner(world), world, scenario.mission[0], "left")
+    model = CollisionModel(world, scenario.risk, uncertainty=scenario.uncertainty)
+    traj = plan.trajectories["left.transfer"]
+    step = next(s for s in plan.steps if s.name == "left.transfer")
+    allow = model.step_allow(step.side, step.kind, "book", step.allow_contact, traj.carried)
+    first = report_from_profile(model, model.profile(traj, allow=allow))
+    mc = monte_carlo_collision_probability(model, traj, np.random.default_rng(1), samples=4000, allow=allow)
+    print(f"carried book: first order {first.probability:.4f}, MC {mc.probability:.4f} +- {mc.stderr:.4f}")
+    assert first.details["min_distance"] > 0.014  # more than one relative sigma: first order holds
+    assert abs(first.probability - mc.probability) < max(0.2 * mc.probability, 3 * mc.stderr)
+    # the book's own error matters: the stack's alone gives a much smaller probability
+    stack_only = collision_probability(
+        [k.near for k in model.profile(traj, allow=allow).knots], model.setup.env_sigma
+    )
+    assert stack_only.probability < 0.6 * first.probability

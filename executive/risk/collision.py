@@ -502,11 +502,14 @@ class CollisionModel:
                 for r in rows:
                     mask[env.index(e), robot.index(r)] = False
         d_safety = self.risk_config.d_safety
+        # A carried object's own pose error widens the band in which its pairs are uncertain.
+        own = self.carried_sigma.get(carried_geom, 0.0) if carried_geom is not None else 0.0
         cutoff = np.array(
             [
                 d_safety
                 + self.margin
-                + self.n_sigma * self.setup.env_sigma.get(int(self.model.geom_bodyid[e]), 0.0)
+                + self.n_sigma
+                * math.hypot(self.setup.env_sigma.get(int(self.model.geom_bodyid[e]), 0.0), own)
                 for e in env
             ]
         )
@@ -695,6 +698,15 @@ class CollisionModel:
             near=tuple(near),
         )
 
+    @property
+    def carried_sigma(self) -> dict[int, float]:
+        """Object geom -> its horizontal 1-sigma, which it keeps when carried (see
+        :func:`collision_probability`)."""
+        return {
+            int(g): float(self.setup.env_sigma.get(int(self.model.geom_bodyid[g]), 0.0))
+            for g in self.setup.object_geoms.values()
+        }
+
     def body_part(self, geom: int) -> tuple[str, float]:
         """(part name, severity factor) of the robot body of ``geom``; ("other", 1.0) if unlisted."""
         return self.setup.part_factors.get(int(self.model.geom_bodyid[geom]), ("other", 1.0))
@@ -724,7 +736,9 @@ def report_from_profile(model: CollisionModel, prof: CollisionProfile) -> RiskRe
     config = model.risk_config
     distances = prof.distances
     seed = seed_collision_score(prof.times, distances, config.d_safety, config.collision)
-    prob = collision_probability([k.near for k in prof.knots], model.setup.env_sigma)
+    prob = collision_probability(
+        [k.near for k in prof.knots], model.setup.env_sigma, robot_sigma=model.carried_sigma
+    )
     k_min = int(np.argmin(distances))
     closest = prof.knots[k_min]
     part, factor = model.body_part(closest.robot_geom)
@@ -741,7 +755,8 @@ def report_from_profile(model: CollisionModel, prof: CollisionProfile) -> RiskRe
         "exposure_term": seed.exposure,
         "pairs_checked": float(prof.pairs_checked),
         "pairs_skipped": float(prof.pairs_skipped),
-        "probability_method": "first-order union over knots (static Gaussian pose error per body)",
+        "probability_method": "first-order union over knots (static Gaussian pose error per body, "
+        "a carried object's own error included)",
     }
     return RiskReport(
         mode="collision",
@@ -793,8 +808,14 @@ def monte_carlo_collision_probability(
     mdl = model.model
     env_bodies = [int(mdl.geom_bodyid[e]) for e in layout.env]
     uncertain = sorted({b for b in env_bodies if model.setup.env_sigma.get(b, 0.0) > 0.0})
-    # Draw all shifts up front, bodies in sorted id order (same generator state, same answer).
+    # Draw all shifts up front, bodies in sorted id order (same generator state, same answer);
+    # then the carried object's own shift (it sits in the hand wherever it really was).
     shifts = {b: rng.normal(0.0, model.setup.env_sigma[b], size=(samples, 2)) for b in uncertain}
+    carried_geom = model._object_geom(carried) if carried is not None else None
+    own_sigma = model.carried_sigma.get(carried_geom, 0.0) if carried_geom is not None else 0.0
+    zero = np.zeros((samples, 2))
+    own = rng.normal(0.0, own_sigma, size=(samples, 2)) if own_sigma > 0.0 else zero
+    own_radius = np.hypot(own[:, 0], own[:, 1])
     radius = {b: np.hypot(s[:, 0], s[:, 1]) for b, s in shifts.items()}
     qpos = np.asarray(trajectory.qpos, dtype=float)
     hit_any = np.zeros(samples, dtype=bool)
@@ -810,23 +831,32 @@ def monte_carlo_collision_probability(
             env, robot, body = layout.env_list[ei], layout.robot_list[ri], env_bodies[ei]
             model._place(data, env)
             model._place(data, robot)
-            if body not in shifts:
+            moves = robot == carried_geom and own_sigma > 0.0
+            if body not in shifts and not moves:
                 if bounds[ei, ri] <= 0.0:
                     calls += 1
                     if model._pair_distance(layout, int(ei), int(ri)) < 0.0:
                         hit[:] = True
                 continue
-            # Only a shift at least as long as the pair's lower bound can close it.
-            transform = model._transforms[env]
-            nominal = np.array(data.geom_xpos[env], dtype=float)
-            for s in np.nonzero(radius[body] >= bounds[ei, ri])[0]:
+            # Only shifts at least as long together as the pair's lower bound can close it.
+            env_shift = shifts.get(body, zero)
+            reach = radius.get(body, zero[:, 0]) + (own_radius if moves else 0.0)
+            env_transform, robot_transform = model._transforms[env], model._transforms[robot]
+            env_nominal = np.array(data.geom_xpos[env], dtype=float)
+            robot_nominal = np.array(data.geom_xpos[robot], dtype=float)
+            for s in np.nonzero(reach >= bounds[ei, ri])[0]:
                 if hit[s]:
                     continue
-                dx, dy = shifts[body][s]
-                transform.setTranslation(nominal + np.array([dx, dy, 0.0]))
+                dx, dy = env_shift[s]
+                env_transform.setTranslation(env_nominal + np.array([dx, dy, 0.0]))
+                if moves:
+                    ox, oy = own[s]
+                    robot_transform.setTranslation(robot_nominal + np.array([ox, oy, 0.0]))
                 calls += 1
                 if model._pair_distance(layout, int(ei), int(ri)) < 0.0:
                     hit[s] = True
+            model._place(data, env)
+            model._place(data, robot)
         per_knot[k] = float(np.mean(hit))
         hit_any |= hit
     p = float(np.mean(hit_any))

@@ -141,7 +141,10 @@ def _group_probability(events: _Events, n_groups: int, n_angles: int) -> FloatAr
 
 
 def collision_probability(
-    knots: Sequence[Sequence[NearPair]], sigma: Mapping[int, float], n_angles: int = _N_ANGLES
+    knots: Sequence[Sequence[NearPair]],
+    sigma: Mapping[int, float],
+    n_angles: int = _N_ANGLES,
+    robot_sigma: Mapping[int, float] | None = None,
 ) -> ProbabilityEstimate:
     """First-order collision probability per knot and over the trajectory.
 
@@ -151,9 +154,21 @@ def collision_probability(
     Bodies are independent; per body the error is one static shift for the whole
     trajectory (as ``world.sample_perturbation`` draws it once per trial). Events with
     ``h > 9`` (P < 1e-19) are dropped.
+
+    ``robot_sigma`` maps a robot-side geom to its own horizontal 1-sigma: a carried object
+    sits in the hand wherever it really was (a grasp at the estimated pose does not
+    re-centre it), so against an environment body of sigma ``s_e`` it is off by the
+    difference of two independent shifts, ``N(0, (s_e^2 + s_o^2) I_2)``. Such pairs form
+    their own group (environment body, carried geom); treating that group as independent
+    of the environment body's other pairs is the approximation (the union over groups).
     """
+    robot_sigma = robot_sigma or {}
+
+    def key(p: NearPair) -> tuple[int, int]:
+        return (p.env_body, p.robot_geom if robot_sigma.get(p.robot_geom, 0.0) > 0.0 else -1)
+
     n_knots = len(knots)
-    bodies = sorted({p.env_body for pairs in knots for p in pairs})
+    bodies = sorted({key(p) for pairs in knots for p in pairs})
     column = {b: i for i, b in enumerate(bodies)}
     n_bodies = len(bodies)
     # Group ids: knot-level (k * n_bodies + body) and trajectory-level (body).
@@ -164,8 +179,8 @@ def collision_probability(
     worst = np.zeros(n_knots * n_bodies)
     for k, pairs in enumerate(knots):
         for p in pairs:
-            gid = k * n_bodies + column[p.env_body]
-            s = float(sigma.get(p.env_body, 0.0))
+            gid = k * n_bodies + column[key(p)]
+            s = math.hypot(float(sigma.get(p.env_body, 0.0)), float(robot_sigma.get(p.robot_geom, 0.0)))
             nx, ny = float(p.normal[0]), float(p.normal[1])
             lateral = math.hypot(nx, ny)
             if s * lateral <= 1e-12:  # no uncertainty along this normal: deterministic
