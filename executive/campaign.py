@@ -348,7 +348,7 @@ class _Runner:
                 import ray
             except ImportError:
                 raise ExecutiveError(
-                    "--backend ray needs Ray: pip install 'humanoid-risk-executive[cluster]' "
+                    "--backend ray needs Ray: pip install 'risk-gated-executive[cluster]' "
                     "(or pip install ray); the default --backend local needs nothing more"
                 ) from None
             if not ray.is_initialized():
