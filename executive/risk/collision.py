@@ -353,7 +353,7 @@ def _sphere_box_bounds(
     boxes (``geom_aabb`` in frames pos (..., E, 3), rot (..., E, 9), world = rot @ local)."""
     rot = rot.reshape(*rot.shape[:-1], 3, 3)
     rel = centres[..., None, :, :] - pos[..., :, None, :]  # (..., E, R, 3)
-    local = np.einsum("...eij,...eri->...erj", rot, rel)
+    local = np.matmul(rel, rot)  # local_j = sum_i rel_i rot_ij, per environment geom
     aabb = model.geom_aabb[layout.env]  # (E, 6): centre, half sizes in the geom frame
     outside = np.maximum(np.abs(local - aabb[:, None, :3]) - aabb[:, None, 3:], 0.0)
     gap = np.sqrt(np.einsum("...j,...j->...", outside, outside)) - model.geom_rbound[layout.robot]

@@ -163,38 +163,36 @@ def collision_probability(
     of the environment body's other pairs is the approximation (the union over groups).
     """
     robot_sigma = robot_sigma or {}
-
-    def key(p: NearPair) -> tuple[int, int]:
-        return (p.env_body, p.robot_geom if robot_sigma.get(p.robot_geom, 0.0) > 0.0 else -1)
-
     n_knots = len(knots)
-    bodies = sorted({key(p) for pairs in knots for p in pairs})
-    column = {b: i for i, b in enumerate(bodies)}
+    flat = [p for pairs in knots for p in pairs]
+    knot = np.repeat(np.arange(n_knots), [len(pairs) for pairs in knots])
+    env_body = np.fromiter((p.env_body for p in flat), dtype=int, count=len(flat))
+    robot_geom = np.fromiter((p.robot_geom for p in flat), dtype=int, count=len(flat))
+    distance = np.fromiter((p.distance for p in flat), dtype=float, count=len(flat))
+    normal = np.array([p.normal[:2] for p in flat], dtype=float).reshape(-1, 2)
+    # sigma per pair from small lookup tables (ids are small non-negative ints)
+    env_table = np.zeros(max([*sigma, *env_body.tolist(), 0]) + 1)
+    for b, v in sigma.items():
+        env_table[b] = v
+    own_table = np.zeros(max([*robot_sigma, *robot_geom.tolist(), 0]) + 1)
+    for g, v in robot_sigma.items():
+        own_table[g] = v
+    s_env, s_own = env_table[env_body], own_table[robot_geom]
+    # Groups: the environment body, or (environment body, carried geom) for a geom with its own sigma.
+    key = env_body * (len(own_table) + 1) + np.where(s_own > 0.0, robot_geom + 1, 0)
+    bodies, column = np.unique(key, return_inverse=True)
     n_bodies = len(bodies)
-    # Group ids: knot-level (k * n_bodies + body) and trajectory-level (body).
-    kgroup: list[int] = []
-    phis: list[float] = []
-    hs: list[float] = []
+    gid_all = knot * n_bodies + column.reshape(-1)
     certain = np.zeros(n_knots * n_bodies, dtype=bool)
     worst = np.zeros(n_knots * n_bodies)
-    for k, pairs in enumerate(knots):
-        for p in pairs:
-            gid = k * n_bodies + column[key(p)]
-            s = math.hypot(float(sigma.get(p.env_body, 0.0)), float(robot_sigma.get(p.robot_geom, 0.0)))
-            nx, ny = float(p.normal[0]), float(p.normal[1])
-            lateral = math.hypot(nx, ny)
-            if s * lateral <= 1e-12:  # no uncertainty along this normal: deterministic
-                certain[gid] |= p.distance <= 0.0
-                continue
-            reach = p.distance / (s * lateral)
-            if reach > 9.0:
-                continue
-            worst[gid] = max(worst[gid], float(ndtr(-reach)))
-            kgroup.append(gid)
-            phis.append(math.atan2(ny, nx))
-            hs.append(reach)
-    group = np.array(kgroup, dtype=int)
-    phi, h = np.array(phis), np.array(hs)
+    scale = np.hypot(s_env, s_own) * np.hypot(normal[:, 0], normal[:, 1])
+    exact = scale <= 1e-12  # no uncertainty along this normal: deterministic
+    np.logical_or.at(certain, gid_all[exact], distance[exact] <= 0.0)
+    reach = np.divide(distance, scale, out=np.full(len(flat), np.inf), where=~exact)
+    keep = ~exact & (reach <= 9.0)
+    group, h = gid_all[keep], reach[keep]
+    np.maximum.at(worst, group, ndtr(-h))
+    phi = np.arctan2(normal[keep, 1], normal[keep, 0])
     per_group = _group_probability(_Events(group, phi, h, certain, worst), n_knots * n_bodies, n_angles)
     miss = np.prod(1.0 - per_group.reshape(n_knots, n_bodies), axis=1) if n_bodies else np.ones(n_knots)
     per_knot = 1.0 - miss
