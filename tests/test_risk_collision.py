@@ -381,3 +381,10 @@ def test_a_carried_object_keeps_its_own_pose_error_first_order_matches_monte_car
         [k.near for k in model.profile(traj, allow=allow).knots], model.setup.env_sigma
     )
     assert stack_only.probability < 0.6 * first.probability
+
+
+def test_one_half_plane_is_the_closed_form_and_two_the_quadrature() -> None:
+    # One event: Phi(-b/|a|) exactly. Two orthogonal events: 1 - Phi(b1) Phi(b2) (independent axes).
+    assert gaussian_union_probability(np.array([[0.0, 2.0]]), np.array([3.0])) == norm.cdf(-1.5)
+    two = gaussian_union_probability(np.array([[1.0, 0.0], [0.0, 1.0]]), np.array([1.0, 2.0]))
+    assert two == pytest.approx(1.0 - norm.cdf(1.0) * norm.cdf(2.0), abs=1e-6)  # 720-angle midpoint rule

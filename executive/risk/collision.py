@@ -603,8 +603,8 @@ class CollisionModel:
         self._result.clear()
         return float(
             layout.functors[ei][ri](
-                self._transforms[int(layout.env[ei])],
-                self._transforms[int(layout.robot[ri])],
+                self._transforms[layout.env_list[ei]],
+                self._transforms[layout.robot_list[ri]],
                 self._request,
                 self._result,
             )
@@ -641,17 +641,17 @@ class CollisionModel:
         witness = (np.zeros(3), np.zeros(3), np.zeros(3))
         near: list[NearPair] = []
         checked = 0
+        pair_distance, env_body = self._pair_distance, layout.env_body
+        record = travel.record if travel is not None else None
 
         def visit(ei: int, ri: int) -> None:
             nonlocal best, best_e, best_r, witness, checked
-            d = self._pair_distance(layout, ei, ri)
+            d = pair_distance(layout, ei, ri)
             checked += 1
-            if travel is not None:
-                travel.record(ei, ri, d)
+            if record is not None:
+                record(ei, ri, d)
             if d <= cutoff[ei]:
-                near.append(
-                    NearPair(layout.env_body[ei], env_ids[ei], robot_ids[ri], d, np.array(res.normal))
-                )
+                near.append(NearPair(env_body[ei], env_ids[ei], robot_ids[ri], d, np.array(res.normal)))
             if d < best:
                 best, best_e, best_r = d, ei, ri
                 witness = (
