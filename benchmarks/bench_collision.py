@@ -19,15 +19,12 @@ import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
 
-import coal
-import mujoco
 import numpy as np
 from numpy.typing import NDArray
+from raw_reference import Knot, raw_distances, record_pairs
 
 from executive.risk.collision import CollisionModel, assess_collision, monte_carlo_collision_probability
-from executive.risk.shapes import coal_geometry, coal_transform
 from executive.scenario import load
 from executive.world import World, build
 
@@ -74,48 +71,9 @@ def _time(fn: Callable[[], object], repeats: int) -> float:
     return float(best)
 
 
-def _checked_pairs(model: CollisionModel, path: Sweep) -> list[list[tuple[int, int]]]:
-    """The (env, robot) geom pairs the broad phase sends to coal, per knot (recorded from one run)."""
-    record: list[list[tuple[int, int]]] = []
-    knot, pair = model._knot_from_data, model._pair_distance
-
-    def knot_spy(*args: Any) -> Any:
-        record.append([])
-        return knot(*args)
-
-    def pair_spy(layout: Any, ei: int, ri: int) -> float:
-        record[-1].append((layout.env_list[ei], layout.robot_list[ri]))
-        return pair(layout, ei, ri)
-
-    model._knot_from_data = knot_spy  # type: ignore[method-assign,assignment]
-    model._pair_distance = pair_spy  # type: ignore[method-assign]
-    try:
-        model.profile(path)
-    finally:
-        del model._knot_from_data, model._pair_distance
-    return record
-
-
-def _raw(world: World, path: Sweep, pairs: list[list[tuple[int, int]]]) -> None:
-    m, d = world.model, mujoco.MjData(world.model)
-    shapes = {g: coal_geometry(m, g) for g in range(m.ngeom)}
-    req, res = coal.DistanceRequest(), coal.DistanceResult()
-
-    def run() -> None:
-        for row, knot_pairs in zip(path.qpos, pairs, strict=True):
-            d.qpos[:] = row
-            mujoco.mj_kinematics(m, d)
-            for e, r in knot_pairs:
-                coal.distance(
-                    shapes[e],
-                    coal_transform(d.geom_xpos[e], d.geom_xmat[e]),
-                    shapes[r],
-                    coal_transform(d.geom_xpos[r], d.geom_xmat[r]),
-                    req,
-                    res,
-                )
-
-    run()
+def _checked_pairs(model: CollisionModel, path: Sweep) -> list[Knot]:
+    """The knots of ``path`` with the (env, robot) geom pairs the broad phase sends to coal."""
+    return record_pairs(model, lambda: model.profile(path))
 
 
 def main(repeats: int = 5) -> None:
@@ -128,15 +86,17 @@ def main(repeats: int = 5) -> None:
         path = sweep(world, 300, carried)
         k = len(path.times)
         pairs = _checked_pairs(model, path)
-        n_checked = sum(len(p) for p in pairs)
+        n_checked = sum(len(p) for _, p in pairs)
         prof = model.profile(path)
         layout = model._layout("book" if carried else None, ())
-        all_pairs = [[(e, r) for e in layout.env_list for r in layout.robot_list] for _ in range(k)]
+        every = [(e, r) for e in layout.env_list for r in layout.robot_list]
+        all_pairs: list[Knot] = [(row, every) for row in path.qpos]
+        kinematics: list[Knot] = [(row, []) for row in path.qpos]
         t_assess = _time(lambda p=path: assess_collision(model, p), repeats)  # type: ignore[misc]
         t_profile = _time(lambda p=path: model.profile(p), repeats)  # type: ignore[misc]
-        t_raw = _time(lambda p=path, q=pairs: _raw(world, p, q), repeats)  # type: ignore[misc]
-        t_all = _time(lambda p=path, q=all_pairs: _raw(world, p, q), repeats)  # type: ignore[misc]
-        t_kin = _time(lambda p=path, n=k: _raw(world, p, [[] for _ in range(n)]), repeats)  # type: ignore[misc]
+        t_raw = _time(raw_distances(world.model, pairs), repeats)
+        t_all = _time(raw_distances(world.model, all_pairs), repeats)
+        t_kin = _time(raw_distances(world.model, kinematics), repeats)
         label = "carried book past the stack" if carried else "reach over the table"
         print(f"\n{label}: {k} knots, min distance {float(np.min(prof.distances)) * 100:.2f} cm")
         print(

@@ -24,17 +24,14 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import sys
 import time
-from typing import Any
 
-import coal
-import mujoco
 import numpy as np
+from raw_reference import raw_distances, record_pairs
 
 from executive.assessment import AlternativeRisk, assess_plan, assess_task
 from executive.composition import AlternativePlan
 from executive.planning import Planner
 from executive.risk.collision import CollisionModel
-from executive.risk.shapes import coal_geometry, coal_transform
 from executive.scenario import load
 from executive.world import World, build
 
@@ -48,48 +45,13 @@ def _knots(plan: AlternativePlan) -> int:
     return sum(len(t.times) for t in plan.trajectories.values())
 
 
-def _record_pairs(model: CollisionModel, world: World, plan: AlternativePlan) -> list[tuple[Any, ...]]:
-    """(qpos, [(env geom, robot geom), ...]) per knot the collision model visited in assess_plan."""
-    record: list[tuple[Any, ...]] = []
-    knot, pair = model._knot_from_data, model._pair_distance
-
-    def knot_spy(data: mujoco.MjData, *args: Any) -> Any:
-        record.append((data.qpos.copy(), []))
-        return knot(data, *args)
-
-    def pair_spy(layout: Any, ei: int, ri: int) -> float:
-        record[-1][1].append((layout.env_list[ei], layout.robot_list[ri]))
-        return pair(layout, ei, ri)
-
-    model._knot_from_data = knot_spy  # type: ignore[method-assign,assignment]
-    model._pair_distance = pair_spy  # type: ignore[method-assign]
-    try:
-        assess_plan(world, plan, model)
-    finally:
-        del model._knot_from_data, model._pair_distance
-    return record
-
-
-def _raw_seconds(world: World, record: list[tuple[Any, ...]], repeats: int) -> float:
-    """Best time of mj_kinematics + coal.distance (fresh transforms) on the recorded knots and pairs."""
-    m, d = world.model, mujoco.MjData(world.model)
-    shapes = {g: coal_geometry(m, g) for g in range(m.ngeom)}
-    req, res = coal.DistanceRequest(), coal.DistanceResult()
+def _raw_seconds(world: World, model: CollisionModel, plan: AlternativePlan, repeats: int) -> float:
+    """Best CPU time of mj_kinematics + coal.distance on the knots and pairs assess_plan visits."""
+    run = raw_distances(world.model, record_pairs(model, lambda: assess_plan(world, plan, model)))
     best = np.inf
     for _ in range(repeats):
         t0 = time.process_time()
-        for qpos, pairs in record:
-            d.qpos[:] = qpos
-            mujoco.mj_kinematics(m, d)
-            for e, r in pairs:
-                coal.distance(
-                    shapes[e],
-                    coal_transform(d.geom_xpos[e], d.geom_xmat[e]),
-                    shapes[r],
-                    coal_transform(d.geom_xpos[r], d.geom_xmat[r]),
-                    req,
-                    res,
-                )
+        run()
         best = min(best, time.process_time() - t0)
     return float(best)
 
@@ -134,7 +96,7 @@ def main(repeats: int = 3) -> None:
             continue
         knots = _knots(alt.plan)
         assess = _assess_seconds(world, alt.plan, model, repeats)
-        raw = _raw_seconds(world, _record_pairs(model, world, alt.plan), repeats)
+        raw = _raw_seconds(world, model, alt.plan, repeats)
         sum_assess, sum_raw, sum_knots = sum_assess + assess, sum_raw + raw, sum_knots + knots
         print(
             f"{alt.name:<15}{alt.plan_s:>8.3f}{assess:>10.3f}{knots:>7d}"
