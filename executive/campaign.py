@@ -47,6 +47,7 @@ from pathlib import Path
 from typing import IO, Any, Literal
 
 import numpy as np
+from numpy.typing import NDArray
 
 from executive.errors import ExecutiveError
 from executive.scenario_types import Scenario, SceneVariation
@@ -72,8 +73,12 @@ FAILURE_MODES = ("collision", "fall", "drop", "unstable", "timeout")
 # The predicted probability that forecasts each observed failure mode: the grasp risk is the
 # seed's risk that the object is not held (Long et al. 2018), so it forecasts drops.
 PREDICTOR = {"collision": "collision", "fall": "fall", "drop": "grasp"}
+# ... and, for any failure at all, the probability of any failure.
+_FORECASTS = {**PREDICTOR, "any": "combined"}
 
 Backend = Literal["local", "ray"]
+FloatArray = NDArray[np.float64]
+BoolArray = NDArray[np.bool_]
 
 
 @dataclass(frozen=True)
@@ -415,6 +420,19 @@ class _Runner:
 # --- statistics --------------------------------------------------------------------------------
 
 
+def _executed(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The trials that ran in physics (not infeasible, not failed by a defect)."""
+    return [r for r in records if r["outcome"] not in ("infeasible", "error")]
+
+
+def _forecasts(executed: Sequence[dict[str, Any]]) -> Iterator[tuple[str, str, FloatArray, BoolArray]]:
+    """Per failure mode (and "any"): the predicting key, its probabilities and the 0/1 outcomes."""
+    for mode, key in _FORECASTS.items():
+        p = np.array([r["predicted"][key] for r in executed], dtype=float)
+        y = np.array([r["outcome"] != "success" if mode == "any" else r["outcome"] == mode for r in executed])
+        yield mode, key, p, y.astype(bool)
+
+
 def _rate(failures: int, trials: int) -> dict[str, Any]:
     from executive.stats import clopper_pearson
 
@@ -436,7 +454,7 @@ def summarise(
     intervals, mean predicted risk; overall: AUC, Brier and ECE per mode and Spearman."""
     from executive.stats import brier, expected_calibration_error, roc_auc, spearman
 
-    executed = [r for r in records if r["outcome"] not in ("infeasible", "error")]
+    executed = _executed(records)
     per_alt = []
     ordering = scenario.risk.ordering
     for name in alternatives:
@@ -473,9 +491,7 @@ def summarise(
     brier_by: dict[str, float | None] = {}
     ece_by: dict[str, float | None] = {}
     observed_by: dict[str, int] = {}
-    for mode, key in {**PREDICTOR, "any": "combined"}.items():
-        p = np.array([r["predicted"][key] for r in executed], dtype=float)
-        y = np.array([r["outcome"] != "success" if mode == "any" else r["outcome"] == mode for r in executed])
+    for mode, _, p, y in _forecasts(executed):
         observed_by[mode] = int(y.sum())
         auc[mode] = _finite(roc_auc(p, y))
         rate = {
@@ -503,7 +519,7 @@ def summarise(
         "ece": ece_by,
         "spearman": rho[ordering],
         "spearman_by": rho,
-        "predictor": {**PREDICTOR, "any": "combined"},
+        "predictor": dict(_FORECASTS),
     }
 
 
@@ -521,24 +537,55 @@ def _num(x: float | None, fmt: str = ".3f") -> str:
     return "-" if x is None else format(x, fmt)
 
 
+# The per-alternative columns both tables show: (text header, markdown header, text width).
+_COLUMNS = (
+    ("alternative", "alternative", -15),
+    ("trials", "trials", 7),
+    ("P(coll)", "P(collision)", 9),
+    ("P(fall)", "P(fall)", 9),
+    ("P(grasp)", "P(grasp)", 9),
+    ("P(any)", "P(any)", 9),
+    ("exp.loss", "expected loss", 9),
+    ("coll.", "collision", 6),
+    ("fall", "fall", 6),
+    ("drop", "drop", 6),
+    ("unst.", "unstable", 6),
+    ("t/o", "timeout", 6),
+    ("any", "any failure", 6),
+    ("95% CI", "95% CI", 10),
+)
+
+
+def _cells(a: dict[str, Any]) -> list[str]:
+    """One alternative's row of :data:`_COLUMNS` (an infeasible one: why, in the third cell)."""
+    if not a["trials"]:
+        return [a["name"], "0", f"infeasible: {a['error'][:80]}"]
+    p, f = a["predicted"], a["failure_rate_by_mode"]
+    predicted = [f"{p[k]:.4f}" for k in ("collision", "fall", "grasp", "combined", "expected_loss")]
+    observed = [_pct(f[m]) for m in FAILURE_MODES]
+    return [
+        a["name"],
+        str(a["trials"]),
+        *predicted,
+        *observed,
+        _pct(a["failure_rate"]),
+        _ci(a["failure_rate"]),
+    ]
+
+
+def _text_row(cells: Sequence[str]) -> str:
+    return "".join(
+        f" {c:>{w}}" if w > 0 else f"{c:<{-w}}" for c, (_, _, w) in zip(cells, _COLUMNS, strict=False)
+    )
+
+
 def table_text(summary: dict[str, Any]) -> str:
     """The seed's Table 1, at scale: predicted risk and observed failures per alternative."""
-    head = (
-        f"{'alternative':<15}{'trials':>7} | {'P(coll)':>8}{'P(fall)':>8}{'P(grasp)':>9}{'P(any)':>8}"
-        f"{'exp.loss':>9} | {'coll.':>6}{'fall':>6}{'drop':>6}{'unst.':>6}{'t/o':>6}{'any':>6}  95% CI"
-    )
-    lines = ["predicted (on the estimate)  vs  observed (detectors, in physics)", head]
-    for a in summary["alternatives"]:
-        if not a["trials"]:
-            lines.append(f"{a['name']:<15}{0:>7} | infeasible: {a['error'][:80]}")
-            continue
-        p, f = a["predicted"], a["failure_rate_by_mode"]
-        lines.append(
-            f"{a['name']:<15}{a['trials']:>7} | {p['collision']:>8.4f}{p['fall']:>8.4f}{p['grasp']:>9.4f}"
-            f"{p['combined']:>8.4f}{p['expected_loss']:>9.4f} | "
-            + "".join(f"{_pct(f[m]):>6}" for m in FAILURE_MODES)
-            + f"{_pct(a['failure_rate']):>6}  {_ci(a['failure_rate'])}"
-        )
+    lines = [
+        "predicted (on the estimate)  vs  observed (detectors, in physics)",
+        _text_row([c[0] for c in _COLUMNS]),
+    ]
+    lines += [_text_row(_cells(a)) for a in summary["alternatives"]]
     auc, b, e = summary["auc"], summary["brier"], summary["ece"]
     lines.append(
         "AUC    " + "  ".join(f"{m} {_num(auc[m])} ({summary['observed_failures'][m]} observed)" for m in auc)
@@ -558,23 +605,14 @@ def table_text(summary: dict[str, Any]) -> str:
 
 
 def table_markdown(summary: dict[str, Any]) -> str:
-    """:func:`table_text` as a markdown table (for a README or a report)."""
+    """:func:`table_text` as markdown tables (for a README or a report)."""
     rows = [
-        "| alternative | trials | P(collision) | P(fall) | P(grasp) | P(any) | collision | fall | drop "
-        "| unstable | timeout | any failure (95% CI) |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+        "| " + " | ".join(c[1] for c in _COLUMNS) + " |",
+        "|---|" + "---:|" * (len(_COLUMNS) - 1),
     ]
     for a in summary["alternatives"]:
-        if not a["trials"]:
-            rows.append(f"| {a['name']} | 0 | infeasible | | | | | | | | | |")
-            continue
-        p, f = a["predicted"], a["failure_rate_by_mode"]
-        rows.append(
-            f"| {a['name']} | {a['trials']} | {p['collision']:.4f} | {p['fall']:.4f} | {p['grasp']:.4f} "
-            f"| {p['combined']:.4f} | "
-            + " | ".join(_pct(f[m]) for m in FAILURE_MODES)
-            + f" | {_pct(a['failure_rate'])} {_ci(a['failure_rate'])} |"
-        )
+        cells = _cells(a)
+        rows.append("| " + " | ".join(cells + [""] * (len(_COLUMNS) - len(cells))) + " |")
     auc, b, e = summary["auc"], summary["brier"], summary["ece"]
     rows.append("")
     ceiling = summary["auc_ceiling_per_alternative"]
@@ -599,12 +637,7 @@ def table_markdown(summary: dict[str, Any]) -> str:
 def _reliability(records: Sequence[dict[str, Any]], path: Path) -> Path:
     from executive.stats import reliability_diagram
 
-    executed = [r for r in records if r["outcome"] not in ("infeasible", "error")]
-    curves = []
-    for mode, key in {**PREDICTOR, "any": "combined"}.items():
-        p = [r["predicted"][key] for r in executed]
-        y = [r["outcome"] != "success" if mode == "any" else r["outcome"] == mode for r in executed]
-        curves.append((f"{mode} by P({key})", p, y))
+    curves = [(f"{mode} by P({key})", p, y) for mode, key, p, y in _forecasts(_executed(records))]
     return reliability_diagram(curves, path)
 
 
