@@ -198,15 +198,22 @@ def _deg_non_negative(node: Node) -> float:
     return math.radians(node.non_negative())
 
 
+# 1-sigma spreads of the scene's poses (m, m, deg in YAML -> rad): an estimate's error
+# (uncertainty) and the trial-to-trial shift of a campaign's scene (trials.scene_variation).
+_POSE_SPREADS: dict[str, tuple[str, Callable[[Node], object]]] = {
+    "object_position": ("object_position", Node.non_negative),
+    "object_yaw": ("object_yaw_rad", _deg_non_negative),
+    "obstacle_position": ("obstacle_position", Node.non_negative),
+}
+
+
 def _uncertainty(node: Node) -> Uncertainty:
     nonneg = Node.non_negative
     return read_fields(
         node,
         Uncertainty,
         {
-            "object_position": ("object_position", nonneg),
-            "object_yaw": ("object_yaw_rad", _deg_non_negative),
-            "obstacle_position": ("obstacle_position", nonneg),
+            **_POSE_SPREADS,
             "com": ("com", nonneg),
             "object_mass": ("object_mass", nonneg),
             "friction": ("friction", nonneg),
@@ -235,16 +242,7 @@ def _trials(node: Node) -> TrialsConfig:
 
 
 def _scene_variation(node: Node) -> SceneVariation:
-    nonneg = Node.non_negative
-    return read_fields(
-        node,
-        SceneVariation,
-        {
-            "object_position": ("object_position", nonneg),
-            "object_yaw": ("object_yaw_rad", _deg_non_negative),
-            "obstacle_position": ("obstacle_position", nonneg),
-        },
-    )
+    return read_fields(node, SceneVariation, _POSE_SPREADS)
 
 
 # ----------------------------------------------------------------------------- risk
