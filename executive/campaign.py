@@ -337,13 +337,9 @@ class _Runner:
     def __init__(
         self, scenario: Scenario, task_index: int, jobs: int, backend: Backend, folder: Path
     ) -> None:
-        self.scenario, self.task_index, self.jobs, self.backend, self.folder = (
-            scenario,
-            task_index,
-            jobs,
-            backend,
-            folder,
-        )
+        self.scenario = scenario
+        self.task_index = task_index
+        self.folder = folder
         self._pool: Any = None
         self._ray: Any = None
         self._predictions: dict[str, Prediction] = {}
