@@ -321,6 +321,7 @@ class Planner:
             cfg.detection_distance,
             cfg.collision_gain,
             attach,
+            cfg.collision_recovery,
         )
         # Keep a small extra margin in the QP so that interpolated knots stay inside the checked one.
         balance = SupportPolygonLimit(model, ids.base_body, polygon, cfg.support_margin + 0.002)
@@ -328,7 +329,9 @@ class Planner:
         constraints: list[mink.Task] = [*self.feet, self.freeze]
 
         clearance0 = collisions.distances(conf.data)
-        clearance = clearance0
+        # What a step may not cut below: the required clearance (or the start distance, when a
+        # pair starts closer), less a slack well inside the knots' check (clearance_tolerance).
+        floor = np.minimum(clearance0, required) - cfg.step_slack
         path = [conf.q]
         errors = self._errors(active)
         history = [max(p + a for p, a in errors.values())]
@@ -349,15 +352,7 @@ class Planner:
             self._lead(active)
             tick = time.perf_counter()
             try:
-                velocity = mink.solve_ik(
-                    conf,
-                    tasks,
-                    cfg.ik_dt,
-                    solver="daqp",
-                    damping=cfg.damping,
-                    limits=limits,
-                    constraints=constraints,
-                )
+                velocity = self._solve(tasks, limits, constraints, collisions)
             except mink.NoSolutionFound as exc:
                 side, (pos, ang) = max(errors.items(), key=lambda kv: kv[1][0])
                 raise PlanningError(
@@ -370,7 +365,7 @@ class Planner:
                     f"{side} hand {pos:.3f} m and {np.degrees(ang):.1f} deg from its target",
                 ) from exc
             ik_time += time.perf_counter() - tick
-            clearance = self._step(velocity, relative, collisions, clearance, required)
+            self._step(velocity, relative, collisions, floor)
             iterations += 1
             path.append(conf.q)
             errors = self._errors(active)
@@ -451,23 +446,61 @@ class Planner:
                 mink.SE3.from_rotation_and_translation(rotation, pose.translation() + alpha * delta)
             )
 
+    def _solve(
+        self,
+        tasks: list[mink.Task],
+        limits: list[mink.Limit],
+        constraints: list[mink.Task],
+        collisions: GeomPairCollisionLimit,
+    ) -> FloatArray:
+        """One IK step's QP. Should pushing pairs back out to their clearance (the collision
+        rows' recovery) leave no solution, solve again with the rows only holding them."""
+        cfg = self.config
+        try:
+            return mink.solve_ik(
+                self.configuration,
+                tasks,
+                cfg.ik_dt,
+                solver="daqp",
+                damping=cfg.damping,
+                limits=limits,
+                constraints=constraints,
+            )
+        except mink.NoSolutionFound:
+            if collisions.recovery == 0.0:
+                raise
+        collisions.recovery = 0.0
+        try:
+            return mink.solve_ik(
+                self.configuration,
+                tasks,
+                cfg.ik_dt,
+                solver="daqp",
+                damping=cfg.damping,
+                limits=limits,
+                constraints=constraints,
+            )
+        finally:
+            collisions.recovery = cfg.collision_recovery
+
     def _step(
         self,
         velocity: FloatArray,
         relative: Relative | None,
         collisions: GeomPairCollisionLimit,
-        clearance: FloatArray,
-        required: FloatArray,
+        floor: FloatArray,
     ) -> FloatArray:
-        """Integrate one IK step, halving it while a pair ends up closer than the QP allowed.
+        """Integrate one IK step, halving it while a pair ends up closer than ``floor``.
 
         The collision rows bound the approach to first order only; near a box's edge a
-        long step can still cut in by millimetres. Pairs must keep their ``required``
-        clearance (or, when already closer, not come closer). Returns the pairs' distances after the step.
+        long step can still cut in by millimetres. ``floor`` is fixed for the move (the
+        required clearance, or the start distance of a pair that starts closer, less
+        ``step_slack``), not the last step's distance: a pair sliding along a surface at
+        its clearance drifts by second-order amounts each step, and a floor that ratchets
+        with it would halve every step. Returns the pairs' distances after the step.
         """
         conf, cfg = self.configuration, self.config
         q_prev = conf.q.copy()
-        floor = np.minimum(clearance, required)
         alpha = 1.0
         for attempt in range(cfg.backtrack_steps + 1):
             conf.integrate_inplace(velocity * alpha, cfg.ik_dt)
@@ -477,7 +510,7 @@ class Planner:
                 attach_object(conf.data, relative)
                 conf.update()
             after = collisions.distances(conf.data)
-            if attempt == cfg.backtrack_steps or not np.any(after < floor - 1e-6):
+            if attempt == cfg.backtrack_steps or not np.any(after < floor):
                 return after
             conf.update(q_prev)
             alpha *= 0.5

@@ -200,9 +200,12 @@ class GeomPairCollisionLimit(mink.Limit):
 
     For a pair at distance ``d < detection_distance`` with witness points p1, p2
     and unit normal n = (p2 - p1)/|p2 - p1|, the row is
-    ``-n^T (J_p2 - J_p1) dq <= gain (d - d_min)`` (0 once ``d <= d_min``; ``d_min`` one
-    value for all pairs or one per pair): mink's velocity damper, written for the
-    displacement ``dq`` that mink's QP solves for.
+    ``-n^T (J_p2 - J_p1) dq <= gain (d - d_min)`` (``d_min`` one value for all pairs or one
+    per pair): mink's velocity damper, written for the displacement ``dq`` that mink's QP
+    solves for. Once ``d <= d_min`` the bound is ``-min(gain (d_min - d), recovery)``: a pair
+    that second-order drift (the rows are first order) has taken inside ``d_min`` is pushed
+    back out by at most ``recovery`` per step (mink's bound is 0 there, and a pair sliding
+    along a surface then creeps inwards step after step); ``recovery = 0`` is mink's.
     ``attach`` maps a geom to the body whose Jacobian moves it (a carried object
     moves with the palm, not with its own free joint, whose dofs the planner freezes).
     """
@@ -215,8 +218,10 @@ class GeomPairCollisionLimit(mink.Limit):
         detection_distance: float,
         gain: float,
         attach: dict[int, int] | None = None,
+        recovery: float = 0.0,
     ) -> None:
         self.model = model
+        self.recovery = recovery
         self.pairs = np.array(pairs, dtype=int).reshape(-1, 2)
         # One clearance for every pair, or one per pair.
         self.min_distance = np.broadcast_to(np.asarray(min_distance, dtype=float), (len(self.pairs),)).copy()
@@ -306,7 +311,7 @@ class GeomPairCollisionLimit(mink.Limit):
             # The QP variable of mink.build_ik is the displacement dq = v dt, so the damper bounds
             # the approach per step by gain * gap (mink's own limit divides by dt as well, which
             # for dt < 1 lets a step close more than the whole gap).
-            bounds.append(self.gain * gap if gap > 0 else 0.0)
+            bounds.append(self.gain * gap if gap > 0 else -min(-self.gain * gap, self.recovery))
         if not rows:
             return mink.Constraint()
         return mink.Constraint(G=np.vstack(rows), h=np.array(bounds))

@@ -119,8 +119,13 @@ class PlannerConfig:
             top-down grasp of a flat object brings the fingertips close to the table top.
         detection_distance: pairs closer than this enter the QP (m).
         collision_gain: mink's velocity-damper gain of the collision rows.
+        collision_recovery: a pair that has drifted inside its clearance is pushed back out
+            by up to this much per IK step (m) (see GeomPairCollisionLimit).
         backtrack_steps: an IK step that leaves a pair closer than ``min_distance`` (the
-            rows are first order) is halved up to this many times.
+            rows are first order) less ``step_slack`` is halved up to this many times.
+        step_slack: how far (m) an IK step may leave a pair below its clearance (or below
+            its start distance, when it starts closer); smaller than ``clearance_tolerance``,
+            so the knots between the steps still pass their check.
         clearance_tolerance: the timed trajectory is checked at every knot; a pair closer
             than min_distance minus this (m) is a PlanningError.
         via_clearance: a hand whose straight way is blocked by an obstacle or object
@@ -167,7 +172,9 @@ class PlannerConfig:
     detection_distance: float = 0.10
     clearance_tolerance: float = 0.002
     collision_gain: float = 0.5
+    collision_recovery: float = 0.0005
     backtrack_steps: int = 4
+    step_slack: float = 0.001
     via_clearance: float = 0.04
     via_tolerance: float = 0.03
     leg_velocity: float = 2.0
