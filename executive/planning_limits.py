@@ -88,6 +88,11 @@ class SupportPolygon:
         """Signed distance (m) from ``point`` (xy) to the nearest edge line; positive inside."""
         return float(np.min(self.offsets - self.normals @ np.asarray(point, dtype=float)[:2]))
 
+    def margins(self, points: FloatArray) -> FloatArray:
+        """:meth:`margin` of each row of ``points`` (N, 2 or more; the first two columns are xy)."""
+        xy = np.asarray(points, dtype=float)[:, :2]
+        return np.asarray(np.min(self.offsets[None, :] - xy @ self.normals.T, axis=1), dtype=float)
+
 
 class SupportPolygonLimit(mink.Limit):
     """CoM xy of the subtree of ``body`` stays inside ``polygon`` shrunk by ``margin``.
@@ -236,6 +241,7 @@ class GeomPairCollisionLimit(mink.Limit):
         self._jac2 = np.empty((3, model.nv))
         self._pair_list = [(int(a), int(b)) for a, b in self.pairs]
         self._reach = model.geom_rbound[self.pairs[:, 0]] + model.geom_rbound[self.pairs[:, 1]]
+        self._cores = _Cores(model, self.pairs)
         # The last full query (every candidate within the detection distance): the qpos it was
         # made at and, per candidate, (pair index, distance, witness fromto). The QP step that
         # follows at the same configuration reuses it instead of asking MuJoCo again.
@@ -267,13 +273,39 @@ class GeomPairCollisionLimit(mink.Limit):
         return out
 
     def _candidates(self, data: mujoco.MjData, cutoff: float | None = None) -> NDArray[np.int_]:
-        """Bounding-sphere broadphase (as mink's): pairs that may be within ``cutoff`` (default: the
-        detection distance)."""
+        """Broadphase: pairs that may be within ``cutoff`` (default: the detection distance).
+
+        Bounding spheres first (as mink's), then, for the pairs they keep, the tighter
+        :class:`_Cores` bound (a box or capsule against the other geom's bounding sphere).
+        """
         if len(self.pairs) == 0:
             return np.zeros(0, dtype=int)
+        limit = self.detection_distance if cutoff is None else cutoff
         delta = data.geom_xpos[self.pairs[:, 0]] - data.geom_xpos[self.pairs[:, 1]]
         gap = np.sqrt(np.einsum("ij,ij->i", delta, delta)) - self._reach
-        return np.flatnonzero(gap <= (self.detection_distance if cutoff is None else cutoff))
+        near = np.flatnonzero(gap <= limit)
+        if len(near) == 0:
+            return near
+        bound = self._cores.bounds(data.geom_xpos[None], data.geom_xmat[None], np.zeros_like(near), near)
+        return near[bound <= limit]
+
+    def knot_candidates(
+        self, xpos: FloatArray, xmat: FloatArray, cutoff: float
+    ) -> tuple[NDArray[np.int_], NDArray[np.int_]]:
+        """The broadphase of :meth:`_candidates` at many configurations at once.
+
+        ``xpos`` (K, ngeom, 3) and ``xmat`` (K, ngeom, 9): the geoms' poses at K configurations.
+        Returns (knot, pair) index arrays of the pairs that may be within ``cutoff`` there
+        (every other pair is farther than ``cutoff`` for sure).
+        """
+        if len(self.pairs) == 0 or len(xpos) == 0:
+            empty = np.zeros(0, dtype=int)
+            return empty, empty
+        delta = xpos[:, self.pairs[:, 0]] - xpos[:, self.pairs[:, 1]]
+        gap = np.sqrt(np.einsum("kij,kij->ki", delta, delta)) - self._reach
+        knots, pairs = np.nonzero(gap <= cutoff)
+        keep = self._cores.bounds(xpos, xmat, knots, pairs) <= cutoff
+        return knots[keep], pairs[keep]
 
     def _queries(self, data: mujoco.MjData) -> list[tuple[int, float, FloatArray]]:
         """(pair, distance, fromto) of every candidate at ``data``'s configuration, from the cache
@@ -315,3 +347,64 @@ class GeomPairCollisionLimit(mink.Limit):
         if not rows:
             return mink.Constraint()
         return mink.Constraint(G=np.vstack(rows), h=np.array(bounds))
+
+
+class _Cores:
+    """A lower bound on the distance of geom pairs, tighter than their bounding spheres.
+
+    A box's bounding sphere is far larger than the box when it is flat (a table top), so the
+    sphere test passes every hand near the table. Here each geom of a pair is taken exactly
+    as a box (boxes), as a segment with a radius (capsules; cylinders lie inside theirs), as a
+    ball (spheres; any other shape: its bounding sphere), and the distance from that shape to
+    the other geom's bounding sphere bounds the pair's distance from below; the larger of the
+    two ways round is taken. Planes, height fields and SDFs have no bound (always asked).
+    """
+
+    def __init__(self, model: mujoco.MjModel, pairs: NDArray[np.int_]) -> None:
+        geom = mujoco.mjtGeom
+        # Both ways round: the shape of ``first[i]`` against the sphere of ``second[i]``.
+        self.first = np.concatenate([pairs[:, 0], pairs[:, 1]]).astype(int)
+        self.second = np.concatenate([pairs[:, 1], pairs[:, 0]]).astype(int)
+        kind = model.geom_type[self.first]
+        size = model.geom_size[self.first]
+        self.box = kind == geom.mjGEOM_BOX
+        self.capsule = (kind == geom.mjGEOM_CAPSULE) | (kind == geom.mjGEOM_CYLINDER)
+        self.half = np.where(self.box[:, None], size, 0.0)  # box half sizes
+        self.length = np.where(self.capsule, size[:, 1], 0.0)  # capsule half length
+        # Radius of a capsule, a sphere, or (other shapes) the bounding sphere.
+        self.radius = np.where(
+            self.capsule | (kind == geom.mjGEOM_SPHERE), size[:, 0], model.geom_rbound[self.first]
+        )
+        self.radius = np.where(self.box, 0.0, self.radius)
+        self.reach = model.geom_rbound[self.second]
+        unbounded = (geom.mjGEOM_PLANE, geom.mjGEOM_HFIELD, geom.mjGEOM_SDF)
+        self.unbounded = np.isin(model.geom_type[self.first], unbounded) | np.isin(
+            model.geom_type[self.second], unbounded
+        )
+        self.count = len(pairs)
+
+    def bounds(
+        self, xpos: FloatArray, xmat: FloatArray, knots: NDArray[np.int_], pairs: NDArray[np.int_]
+    ) -> FloatArray:
+        """Lower bounds (m) on the distance of ``pairs`` at configurations ``knots``.
+
+        ``xpos`` (K, ngeom, 3), ``xmat`` (K, ngeom, 9): the geoms' poses at K configurations.
+        """
+        both = np.concatenate([pairs, pairs + self.count])
+        at = np.concatenate([knots, knots])
+        first, second = self.first[both], self.second[both]
+        offset = xpos[at, second] - xpos[at, first]
+        # The offset in the first geom's frame (xmat is row-major: its columns are the axes).
+        local = np.einsum("nij,ni->nj", xmat[at, first].reshape(-1, 3, 3), offset)
+        outside = np.maximum(np.abs(local) - self.half[both], 0.0)  # a box: the excess per axis
+        capsule = self.capsule[both]
+        axial = np.clip(local[:, 2], -self.length[both], self.length[both])
+        outside[capsule, 2] = local[capsule, 2] - axial[capsule]  # a capsule: off its segment
+        outside[capsule, :2] = local[capsule, :2]
+        box = self.box[both]
+        outside[~box & ~capsule] = local[~box & ~capsule]  # a ball: the whole offset
+        core = np.sqrt(np.einsum("ni,ni->n", outside, outside)) - self.radius[both]
+        bound = core - self.reach[both]
+        bound[self.unbounded[both]] = -np.inf
+        half = len(pairs)
+        return np.asarray(np.maximum(bound[:half], bound[half:]), dtype=float)

@@ -163,17 +163,16 @@ def interpolate_path(
     path: FloatArray, s_path: FloatArray, s_query: FloatArray, quat_adr: tuple[int, ...]
 ) -> FloatArray:
     """qpos at ``s_query`` on the piecewise-linear path ``(s_path, path)``."""
-    out = np.empty((len(s_query), path.shape[1]))
     last = len(path) - 1
-    for k, s in enumerate(s_query):
-        i = min(int(np.searchsorted(s_path, s, side="right")) - 1, last)
-        i = max(i, 0)
-        if i == last or s_path[i + 1] <= s_path[i]:
-            out[k] = path[i]
-        else:
-            alpha = (s - s_path[i]) / (s_path[i + 1] - s_path[i])
-            out[k] = (1.0 - alpha) * path[i] + alpha * path[i + 1]
-        normalise_quats(out[k], quat_adr)
+    s_query = np.asarray(s_query, dtype=float)
+    i = np.clip(np.searchsorted(s_path, s_query, side="right") - 1, 0, last)
+    j = np.minimum(i + 1, last)
+    span = s_path[j] - s_path[i]
+    inside = (i < last) & (span > 0.0)
+    alpha = np.where(inside, (s_query - s_path[i]) / np.where(inside, span, 1.0), 0.0)[:, None]
+    out = np.asarray((1.0 - alpha) * path[i] + alpha * path[j], dtype=float)
+    for a in quat_adr:
+        out[:, a : a + 4] /= np.linalg.norm(out[:, a : a + 4], axis=1, keepdims=True)
     return out
 
 
@@ -214,11 +213,12 @@ def build_trajectory(
     for _ in range(cfg.zmp_retime_rounds):
         times, s_knots = retime(float(s_path[-1]), ratio, cfg.knot_spacing, cfg.max_knots, duration)
         qpos = interpolate_path(path, s_path, s_knots, frames.quat_adr)
-        com, attached, hand_xyz = _com_path(model, data, qpos, relative, frames)
+        knots = _knot_kinematics(model, data, qpos, relative, frames)
+        com = knots.com
         zmp = zmp_path(times, com)
-        worst_zmp = min(polygon.margin(p) for p in zmp)
+        worst_zmp = float(np.min(polygon.margins(zmp)))
         # A CoM held near the edge cannot have its ZMP further in than itself: then ask for less.
-        needed = min(cfg.zmp_margin, min(polygon.margin(c) for c in com) - 0.005)
+        needed = min(cfg.zmp_margin, float(np.min(polygon.margins(com))) - 0.005)
         if worst_zmp >= needed or float(s_path[-1]) == 0.0:
             break
         # The CoM's acceleration scales with 1/T^2 on the same path: stretch and check again.
@@ -233,30 +233,46 @@ def build_trajectory(
             f"motion '{name}': the zero-moment point comes {worst_zmp:.4f} m from the support polygon's "
             f"edge even at {times[-1]:.1f} s (needs {needed:.3f} m)",
         )
-    # The last round's knots, a carried object re-attached to its hand (as _com_path left them).
-    qpos = attached
-    hands = {s: hand_xyz[:, i].copy() for i, s in enumerate(frames.hand_sites)}
+    # The last round's knots, a carried object re-attached to its hand (as _knot_kinematics left them).
+    qpos = knots.qpos
+    hands = {s: knots.hands[:, i].copy() for i, s in enumerate(frames.hand_sites)}
     floor = np.asarray(floor, dtype=float) - cfg.clearance_tolerance
-    # Pairs whose bounding spheres stay farther apart than every floor cannot break one: not asked.
+    # Pairs that the broadphase (on the knots' geom poses) puts farther apart than every floor
+    # cannot break one: not asked.
     cutoff = float(np.max(floor)) if len(floor) else 0.0
-    for k in range(len(times)):
+    at, pairs = collisions.knot_candidates(knots.geom_xpos, knots.geom_xmat, cutoff)
+    fromto = np.empty(6)
+    starts = np.flatnonzero(np.diff(at, prepend=-1))  # each knot's first candidate
+    ends = [*starts[1:].tolist(), len(at)][: len(starts)]
+    for lo, hi in zip(starts.tolist(), ends, strict=True):
+        k = int(at[lo])
         data.qpos[:] = qpos[k]
         mujoco.mj_kinematics(model, data)
-        gaps = collisions.distances(data, cutoff) - floor
+        asked = pairs[lo:hi]
+        gaps = (
+            np.array(
+                [
+                    mujoco.mj_geomDistance(model, data, g1, g2, collisions.detection_distance, fromto)
+                    for g1, g2 in collisions.pairs[asked].tolist()
+                ]
+            )
+            - floor[asked]
+        )
         if np.any(gaps < 0):
-            i = int(np.argmin(gaps))
-            g1, g2 = (str(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)) for g in collisions.pairs[i])
+            worst_pair = int(np.argmin(gaps))
+            i = int(asked[worst_pair])
+            n1, n2 = (str(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)) for g in collisions.pairs[i])
             raise PlanningError(
                 name,
                 None,
                 0.0,
                 0.0,
                 len(path) - 1,
-                f"motion '{name}': geoms '{g1}' and '{g2}' come within "
-                f"{gaps[i] + floor[i]:.4f} m at t = {times[k]:.2f} s "
+                f"motion '{name}': geoms '{n1}' and '{n2}' come within "
+                f"{gaps[worst_pair] + floor[i]:.4f} m at t = {times[k]:.2f} s "
                 f"(clearance {floor[i] + cfg.clearance_tolerance:.3f} m)",
             )
-    worst = min(polygon.margin(c) for c in com)
+    worst = float(np.min(polygon.margins(com)))
     if worst < cfg.support_margin - 1e-9:
         raise PlanningError(
             name,
@@ -270,17 +286,31 @@ def build_trajectory(
     return Trajectory(name, times, qpos, hands, com, carried, frames.quat_adr)
 
 
-def _com_path(
+class _Knots(NamedTuple):
+    """Per knot, a carried object re-attached to its hand: the knots' qpos (K, nq), the
+    whole-robot CoM (K, 3), the hand sites' positions (K, sides, 3) and every geom's pose,
+    (K, ngeom, 3) and (K, ngeom, 9)."""
+
+    qpos: FloatArray
+    com: FloatArray
+    hands: FloatArray
+    geom_xpos: FloatArray
+    geom_xmat: FloatArray
+
+
+def _knot_kinematics(
     model: mujoco.MjModel, data: mujoco.MjData, qpos: FloatArray, relative: Relative | None, frames: Frames
-) -> tuple[FloatArray, FloatArray, FloatArray]:
-    """Per knot, a carried object re-attached to its hand first: the whole-robot CoM (K, 3), the
-    knots' qpos with the object attached (K, nq) and the hand sites' positions (K, sides, 3)."""
-    com = np.empty((len(qpos), 3))
+) -> _Knots:
+    """Forward kinematics at every knot, a carried object re-attached to its hand first."""
+    count = len(qpos)
+    com = np.empty((count, 3))
     attached = np.array(qpos, dtype=float)
     sites = list(frames.hand_sites.values())
-    hands = np.empty((len(qpos), len(sites), 3))
-    for k, q in enumerate(qpos):
-        data.qpos[:] = q
+    hands = np.empty((count, len(sites), 3))
+    xpos = np.empty((count, model.ngeom, 3))
+    xmat = np.empty((count, model.ngeom, 9))
+    for k in range(count):
+        data.qpos[:] = attached[k]
         mujoco.mj_kinematics(model, data)
         if relative is not None:
             attach_object(data, relative)
@@ -289,7 +319,9 @@ def _com_path(
         mujoco.mj_comPos(model, data)
         com[k] = data.subtree_com[frames.base_body]
         hands[k] = data.site_xpos[sites]
-    return com, attached, hands
+        xpos[k] = data.geom_xpos
+        xmat[k] = data.geom_xmat
+    return _Knots(attached, com, hands, xpos, xmat)
 
 
 def zmp_path(times: FloatArray, com: FloatArray, window: float = 0.1, gravity: float = 9.81) -> FloatArray:

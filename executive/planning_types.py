@@ -248,7 +248,10 @@ def body_pose(data: mujoco.MjData, body: int) -> mink.SE3:
 def attach_object(data: mujoco.MjData, relative: Relative) -> None:
     """Put a carried object's free joint at hand pose x relative pose (needs current kinematics)."""
     site, _body, qadr, rel = relative
-    pose = site_pose(data, site) @ rel
-    data.qpos[qadr : qadr + 3] = pose.translation()
-    quat = pose.rotation().wxyz
+    rel_quat, rel_pos = rel.wxyz_xyz[:4], rel.wxyz_xyz[4:]
+    site_quat = np.empty(4)
+    mujoco.mju_mat2Quat(site_quat, data.site_xmat[site])
+    data.qpos[qadr : qadr + 3] = data.site_xpos[site] + data.site_xmat[site].reshape(3, 3) @ rel_pos
+    quat = np.empty(4)
+    mujoco.mju_mulQuat(quat, site_quat, rel_quat)
     data.qpos[qadr + 3 : qadr + 7] = quat / np.linalg.norm(quat)
