@@ -361,26 +361,35 @@ class _Cores:
     """
 
     def __init__(self, model: mujoco.MjModel, pairs: NDArray[np.int_]) -> None:
-        geom = mujoco.mjtGeom
+        box, capsule, cylinder, sphere, plane, hfield, sdf = (
+            int(t)  # numpy compares an array with an int fast, with a pybind11 enum element by element
+            for t in (
+                mujoco.mjtGeom.mjGEOM_BOX,
+                mujoco.mjtGeom.mjGEOM_CAPSULE,
+                mujoco.mjtGeom.mjGEOM_CYLINDER,
+                mujoco.mjtGeom.mjGEOM_SPHERE,
+                mujoco.mjtGeom.mjGEOM_PLANE,
+                mujoco.mjtGeom.mjGEOM_HFIELD,
+                mujoco.mjtGeom.mjGEOM_SDF,
+            )
+        )
         # Both ways round: the shape of ``first[i]`` against the sphere of ``second[i]``.
         self.first = np.concatenate([pairs[:, 0], pairs[:, 1]]).astype(int)
         self.second = np.concatenate([pairs[:, 1], pairs[:, 0]]).astype(int)
         kind = model.geom_type[self.first]
         size = model.geom_size[self.first]
-        self.box = kind == geom.mjGEOM_BOX
-        self.capsule = (kind == geom.mjGEOM_CAPSULE) | (kind == geom.mjGEOM_CYLINDER)
+        self.box = kind == box
+        self.capsule = (kind == capsule) | (kind == cylinder)
         self.half = np.where(self.box[:, None], size, 0.0)  # box half sizes
         self.length = np.where(self.capsule, size[:, 1], 0.0)  # capsule half length
         # Radius of a capsule, a sphere, or (other shapes) the bounding sphere.
-        self.radius = np.where(
-            self.capsule | (kind == geom.mjGEOM_SPHERE), size[:, 0], model.geom_rbound[self.first]
-        )
+        self.radius = np.where(self.capsule | (kind == sphere), size[:, 0], model.geom_rbound[self.first])
         self.radius = np.where(self.box, 0.0, self.radius)
         self.reach = model.geom_rbound[self.second]
-        unbounded = (geom.mjGEOM_PLANE, geom.mjGEOM_HFIELD, geom.mjGEOM_SDF)
-        self.unbounded = np.isin(model.geom_type[self.first], unbounded) | np.isin(
-            model.geom_type[self.second], unbounded
-        )
+        other = model.geom_type[self.second]
+        self.unbounded = np.zeros(len(kind), dtype=bool)
+        for unbounded in (plane, hfield, sdf):
+            self.unbounded |= (kind == unbounded) | (other == unbounded)
         self.count = len(pairs)
 
     def bounds(
