@@ -10,9 +10,12 @@ Per alternative (DESIGN.md, "Data flow of one decision"):
   distance profile;
 * fall: the alternative's steps concatenated into one trajectory; the CoM error
   is one persistent bias, so its probability is exact over all knots;
-* grasp: the first grasp of the object from the table, against the scene's
-  object pose uncertainty (a handover's second grasp takes the object from a
-  hand whose pose the robot knows; it is not scored here);
+* grasp (the drop mode): the first grasp of the object from the table, against
+  the scene's object pose uncertainty (a handover's second grasp takes the object
+  from a hand whose pose the robot knows; it is not scored here), and the
+  placement it leads to: the jaws centre the object across them, but its error
+  along them stays in the hand and lands on the target, where the failure
+  detector calls it misplaced beyond ``place_position_tol`` (see :func:`_grasp`);
 * combined: :func:`executive.risk.combine.combine`.
 """
 
@@ -25,6 +28,7 @@ import mujoco
 import numpy as np
 
 from executive.composition import AlternativePlan, plan_alternative
+from executive.detectors import DetectorThresholds
 from executive.planning import Planner, PlanningError, Trajectory
 from executive.risk.collision import CollisionModel, CollisionProfile, KnotDistance, report_from_profile
 from executive.risk.combine import CombinedRisk, combine
@@ -110,6 +114,13 @@ def _grasp(world: World, side: str, obj: str, approach: Trajectory) -> RiskRepor
 
     A handover grasps the object off-centre on purpose; that planned offset is no error,
     but it uses up part of the geometric tolerance along the same axis.
+
+    The object's error along the jaws (the lateral axis) is not corrected by closing them:
+    the hand carries it to the target, so the object rests that far from it. The drop
+    mode's failures include a placement beyond the failure detector's
+    ``place_position_tol``; the same error ``e`` fails the grasp when ``|e|`` exceeds the
+    lateral tolerance, so the union of the two is ``|e| > min(lateral, place_position_tol)``
+    (exact: nested events of one Gaussian, not a bound).
     """
     scenario = world.scenario
     hand_pos, hand_rot = hand_pose_at(world, approach, side)
@@ -120,7 +131,7 @@ def _grasp(world: World, side: str, obj: str, approach: Trajectory) -> RiskRepor
     full = grasp_tolerance(world, side, obj)
     tolerance = GraspTolerance(
         max(0.0, full.closing - abs(planned.closing)),
-        max(0.0, full.lateral - abs(planned.lateral)),
+        min(max(0.0, full.lateral - abs(planned.lateral)), DetectorThresholds().place_position_tol),
         max(0.0, full.yaw - abs(planned.yaw)),
     )
     # The intended grasp point: where the hand is, at the object's height.
