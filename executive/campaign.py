@@ -122,8 +122,10 @@ def vary_scene(
 ) -> tuple[Scenario, dict[str, Any]]:
     """A trial's scene: every object and obstacle of ``scenario`` shifted by a draw of ``variation``.
 
-    Draws in a fixed order (objects: dx, dy, dyaw; then obstacles: dx, dy). Returns the
-    shifted scenario (the trial's estimate) and the shifts, for the record.
+    Draws in a fixed order (objects: dx, dy, dyaw; then obstacles: dx, dy; then, when
+    ``variation.perception_scale`` is a range, the trial's perception factor, log-uniform).
+    Returns the shifted scenario (the trial's estimate, its pose sigmas scaled by that
+    factor) and the shifts, for the record.
     """
     objects, obstacles = [], []
     shifts: dict[str, Any] = {"object_offsets": {}, "obstacle_offsets": {}}
@@ -144,7 +146,18 @@ def vary_scene(
         obstacles.append(dataclasses.replace(body, position=(x + dx, y + dy, z)))
         shifts["obstacle_offsets"][body.name] = [float(dx), float(dy)]
     scene = dataclasses.replace(scenario.scene, objects=tuple(objects), obstacles=tuple(obstacles))
-    return dataclasses.replace(scenario, scene=scene), _perturbation_json(shifts)
+    uncertainty = scenario.uncertainty
+    low, high = variation.perception_scale
+    if (low, high) != (1.0, 1.0):
+        factor = float(np.exp(rng.uniform(np.log(low), np.log(high))))
+        uncertainty = dataclasses.replace(
+            uncertainty,
+            object_position=uncertainty.object_position * factor,
+            object_yaw_rad=uncertainty.object_yaw_rad * factor,
+            obstacle_position=uncertainty.obstacle_position * factor,
+        )
+        shifts["perception_scale"] = factor
+    return dataclasses.replace(scenario, scene=scene, uncertainty=uncertainty), _perturbation_json(shifts)
 
 
 def trial_scene(scenario: Scenario, seed: int) -> tuple[Scenario, Perturbation, dict[str, Any] | None]:

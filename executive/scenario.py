@@ -242,7 +242,16 @@ def _trials(node: Node) -> TrialsConfig:
 
 
 def _scene_variation(node: Node) -> SceneVariation:
-    return read_fields(node, SceneVariation, _POSE_SPREADS)
+    return read_fields(
+        node, SceneVariation, {**_POSE_SPREADS, "perception_scale": ("perception_scale", _scale_range)}
+    )
+
+
+def _scale_range(node: Node) -> tuple[float, float]:
+    low, high = node.numbers(2, gt=0.0)
+    if low > high:
+        node.fail(f"the range [{low:g}, {high:g}] is reversed: give [low, high] with low <= high")
+    return low, high
 
 
 # ----------------------------------------------------------------------------- risk

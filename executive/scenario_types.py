@@ -210,14 +210,26 @@ class SceneVariation:
     obstacle shifted by a draw of these, and its truth is that scene plus a draw of the
     uncertainty. Zero (the default) keeps one fixed estimate for every trial.
     object_position, obstacle_position: m, per horizontal axis; object_yaw_rad: rad.
+    perception_scale: (low, high): trial i's perception is this much better or worse than
+    the scenario's: its object and obstacle pose sigmas (``Uncertainty`` object_position,
+    object_yaw_rad, obstacle_position) are multiplied by a factor drawn log-uniformly in
+    [low, high]; the truth is drawn with those sigmas and the risk is predicted with them,
+    as a pose estimator reports its covariance with each estimate. (1, 1), the default:
+    every trial has the scenario's sigmas.
     """
 
     object_position: float = 0.0
     object_yaw_rad: float = 0.0
     obstacle_position: float = 0.0
+    perception_scale: tuple[float, float] = (1.0, 1.0)
 
     def is_zero(self) -> bool:
-        return self.object_position == 0.0 and self.object_yaw_rad == 0.0 and self.obstacle_position == 0.0
+        return (
+            self.object_position == 0.0
+            and self.object_yaw_rad == 0.0
+            and self.obstacle_position == 0.0
+            and self.perception_scale == (1.0, 1.0)
+        )
 
 
 @dataclass(frozen=True)

@@ -235,3 +235,54 @@ def test_a_varied_scene_is_planned_and_predicted_per_trial(reference: Path, tmp_
     assert record["predicted"] == pytest.approx(predict(estimate, 0, "left_to_right").risk)
     fixed = next(r for r in _records(reference) if r["alternative"] == "left_to_right")["predicted"]
     assert record["predicted"] != fixed
+
+
+def test_perception_scale_draws_each_trials_sigmas_and_its_truth_from_them() -> None:
+    """trials.scene_variation.perception_scale: a log-uniform factor per trial on the pose sigmas.
+
+    Reference: the truth's errors divided by the trial's own sigmas are standard normal
+    (checked over 4000 trials: mean 0, variance 1 within 5 standard errors), and the factor's
+    logarithm is uniform on [log low, log high] (its mean and variance in closed form).
+    """
+    from executive.campaign import trial_scene
+    from executive.scenario_types import SceneVariation
+
+    base = load("book_transfer")
+    low, high = 0.5, 2.0
+    variation = SceneVariation(object_position=0.01, perception_scale=(low, high))
+    scenario = dataclasses.replace(base, trials=TrialsConfig(count=1, seed=0, scene_variation=variation))
+    n = 4000
+    factors, z_obj, z_obs, z_yaw = [], [], [], []
+    for seed in range(n):
+        estimate, truth, shifts = trial_scene(scenario, seed)
+        assert shifts is not None
+        f = shifts["perception_scale"]
+        factors.append(f)
+        u = estimate.uncertainty
+        assert u.object_position == pytest.approx(base.uncertainty.object_position * f, rel=1e-8)
+        assert u.obstacle_position == pytest.approx(base.uncertainty.obstacle_position * f, rel=1e-8)
+        assert u.object_yaw_rad == pytest.approx(base.uncertainty.object_yaw_rad * f, rel=1e-8)
+        assert (u.com, u.object_mass, u.friction) == (
+            base.uncertainty.com,
+            base.uncertainty.object_mass,
+            base.uncertainty.friction,
+        )
+        dx, dy, dyaw = truth.object_offsets["book"]
+        z_obj += [dx / u.object_position, dy / u.object_position]
+        z_yaw.append(dyaw / u.object_yaw_rad)
+        z_obs += [v / u.obstacle_position for v in truth.obstacle_offsets["book_stack"]]
+    log_f = np.log(factors)
+    assert log_f.min() >= np.log(low) and log_f.max() <= np.log(high)
+    width = np.log(high) - np.log(low)
+    assert log_f.mean() == pytest.approx((np.log(low) + np.log(high)) / 2, abs=5 * width / np.sqrt(12 * n))
+    assert log_f.var() == pytest.approx(width**2 / 12, rel=0.1)
+    for z in (np.array(z_obj), np.array(z_obs), np.array(z_yaw)):
+        assert abs(z.mean()) < 5 / np.sqrt(len(z))
+        assert z.var() == pytest.approx(1.0, abs=5 * np.sqrt(2 / len(z)))
+    # without the range no factor is drawn: the generator's stream is the one of before
+    plain = dataclasses.replace(
+        scenario, trials=TrialsConfig(count=1, seed=0, scene_variation=SceneVariation(object_position=0.01))
+    )
+    estimate, _, shifts = trial_scene(plain, 3)
+    assert shifts is not None and "perception_scale" not in shifts
+    assert estimate.uncertainty == base.uncertainty

@@ -65,7 +65,10 @@ def test_bundled_book_transfer_values() -> None:
         count=10,
         seed=0,
         scene_variation=SceneVariation(
-            object_position=0.01, object_yaw_rad=math.radians(3.0), obstacle_position=0.01
+            object_position=0.01,
+            object_yaw_rad=math.radians(3.0),
+            obstacle_position=0.01,
+            perception_scale=(0.5, 2.0),
         ),
     )
 

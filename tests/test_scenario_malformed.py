@@ -157,6 +157,18 @@ CASES = [
         "trials.scene_variation.object_position",
         ">= 0",
     ),
+    Case(
+        "reversed-perception-scale",
+        put("trials.scene_variation", {"perception_scale": [2.0, 0.5]}),
+        "trials.scene_variation.perception_scale",
+        "reversed",
+    ),
+    Case(
+        "zero-perception-scale",
+        put("trials.scene_variation", {"perception_scale": [0.0, 2.0]}),
+        "trials.scene_variation.perception_scale",
+        "> 0",
+    ),
     # NaN and inf as YAML spells them
     Case(
         "nan-height",
