@@ -15,9 +15,10 @@ The QP of every IK step (mink's formulation, ``min ||J dq + e||_W^2`` subject to
   arms softest, except that an idle arm is held at its start joint angles
   (it moves with the torso, so it cannot wander into it);
 * equality constraints: both feet bodies held at their start pose
-  (``FrameTask`` rows as constraints); finger and object dofs frozen
-  (``DofFreezingTask``);
-* limits: ``ConfigurationLimit``, ``VelocityLimit`` (the joints' velocity limits),
+  (``FrameTask`` rows as constraints); finger and object dofs frozen (left out
+  of the QP, which is the same as mink's ``DofFreezingTask``);
+* limits: ``ConfigurationLimit``, ``VelocityLimit`` (the joints' velocity limits;
+  both as bounds on single dofs, see :class:`~executive.planning_limits.JointBounds`),
   the CoM inside the feet's support polygon shrunk by a margin
   (:class:`~executive.planning_limits.SupportPolygonLimit`), and collision
   avoidance (:class:`~executive.planning_limits.GeomPairCollisionLimit`) between
@@ -53,8 +54,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.planning_limits import (
-    ConfigurationLimit,
     GeomPairCollisionLimit,
+    JointBounds,
     SupportPolygon,
     SupportPolygonLimit,
     TiltLimit,
@@ -166,10 +167,8 @@ class Planner:
         # mink's ComTask regulates body 1's subtree: it must be the robot's base.
         if ids.base_body != 1:
             raise PlanningInputError(f"the robot's base must be body 1 of the model, not {ids.base_body}")
-        self.static_limits: list[mink.Limit] = [
-            ConfigurationLimit(model),
-            mink.VelocityLimit(model, velocity),
-        ]
+        # The joint range and velocity limits as bounds of the step's QP on the unfrozen dofs.
+        self.joints = JointBounds(model, velocity, frozen)
         self.tilt = TiltLimit(model, ids.torso_body, float(np.radians(cfg.max_torso_tilt_deg)))
         self.foot_geoms = [g for s in sorted(ids.foot_geoms) for g in ids.foot_geoms[s]]
         self._pairs: dict[tuple[tuple[str, str] | None, tuple[str, ...]], list[tuple[int, int]]] = {}
@@ -325,8 +324,8 @@ class Planner:
         )
         # Keep a small extra margin in the QP so that interpolated knots stay inside the checked one.
         balance = SupportPolygonLimit(model, ids.base_body, polygon, cfg.support_margin + 0.002)
-        limits = [*self.static_limits, self.tilt, balance, collisions]
-        constraints: list[mink.Task] = [*self.feet, self.freeze]
+        limits: list[mink.Limit] = [self.tilt, balance, collisions]
+        constraints: list[mink.Task] = list(self.feet)
 
         clearance0 = collisions.distances(conf.data)
         # What a step may not cut below: the required clearance (or the start distance, when a
@@ -457,29 +456,13 @@ class Planner:
         rows' recovery) leave no solution, solve again with the rows only holding them."""
         cfg = self.config
         try:
-            return mink.solve_ik(
-                self.configuration,
-                tasks,
-                cfg.ik_dt,
-                solver="daqp",
-                damping=cfg.damping,
-                limits=limits,
-                constraints=constraints,
-            )
+            return self.joints.solve(self.configuration, tasks, cfg.ik_dt, cfg.damping, limits, constraints)
         except mink.NoSolutionFound:
             if collisions.recovery == 0.0:
                 raise
         collisions.recovery = 0.0
         try:
-            return mink.solve_ik(
-                self.configuration,
-                tasks,
-                cfg.ik_dt,
-                solver="daqp",
-                damping=cfg.damping,
-                limits=limits,
-                constraints=constraints,
-            )
+            return self.joints.solve(self.configuration, tasks, cfg.ik_dt, cfg.damping, limits, constraints)
         finally:
             collisions.recovery = cfg.collision_recovery
 
@@ -527,15 +510,7 @@ class Planner:
             drift = max(float(np.linalg.norm(f.compute_error(conf))) for f in self.feet)
             if drift < cfg.feet_tolerance:
                 return
-            velocity = mink.solve_ik(
-                conf,
-                [],
-                cfg.ik_dt,
-                solver="daqp",
-                damping=1.0,
-                limits=self.static_limits[:1],
-                constraints=[*self.feet, self.freeze],
-            )
+            velocity = self.joints.solve(conf, [], cfg.ik_dt, 1.0, [], self.feet, velocity=False)
             conf.integrate_inplace(velocity, cfg.ik_dt)
             conf.update()
 

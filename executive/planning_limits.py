@@ -17,9 +17,10 @@ limits into ``G dq <= h``.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
+import daqp  # type: ignore[import-not-found]  # no stubs; mink solves with it already (solver="daqp")
 import mink
 import mujoco
 import numpy as np
@@ -30,6 +31,7 @@ from executive.polygon import convex_hull, halfplanes
 __all__ = [
     "ConfigurationLimit",
     "GeomPairCollisionLimit",
+    "JointBounds",
     "SupportPolygon",
     "SupportPolygonLimit",
     "TiltLimit",
@@ -161,6 +163,127 @@ class ConfigurationLimit(mink.ConfigurationLimit):
         if constraint.h is None:
             return constraint
         return mink.Constraint(G=constraint.G, h=np.maximum(constraint.h, 0.0))
+
+
+class JointBounds:
+    """The joint range limit (:class:`ConfigurationLimit`) and mink's ``VelocityLimit`` as
+    bounds on each dof of the step, and the IK step's QP on the dofs that may move.
+
+    mink stacks both limits as rows ``[P; -P] dq <= h`` of the QP's general inequalities;
+    they are bounds on single dofs, and DAQP takes those as simple bounds. The dofs frozen by
+    equality constraints (fingers, objects' free joints) are left out of the QP (a variable
+    fixed at zero by an equality contributes nothing else). The QP is mink's
+    (``mink.solve_ik``), its unique solution the same: the feasible set and the (strictly
+    convex) objective are unchanged.
+    """
+
+    def __init__(self, model: mujoco.MjModel, velocities: Mapping[str, float], frozen: Sequence[int]) -> None:
+        self.model = model
+        self.config = ConfigurationLimit(model)
+        self.free = np.array(sorted(set(range(model.nv)) - set(int(d) for d in frozen)), dtype=int)
+        where = np.full(model.nv, -1, dtype=int)
+        where[self.free] = np.arange(len(self.free))
+        hinge = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+        joints = [
+            j
+            for j in range(model.njnt)
+            if model.jnt_limited[j] and int(model.jnt_type[j]) in hinge and where[model.jnt_dofadr[j]] >= 0
+        ]
+        self._range_qadr = np.array([model.jnt_qposadr[j] for j in joints], dtype=int)
+        self._range_at = np.array([where[model.jnt_dofadr[j]] for j in joints], dtype=int)
+        self._lower = np.array([model.jnt_range[j, 0] for j in joints], dtype=float)
+        self._upper = np.array([model.jnt_range[j, 1] for j in joints], dtype=float)
+        # Limited ball joints keep mink's row (a bound on the rotation angle, not on a dof).
+        self._ball_rows = len(self.config._ball_qposadr)
+        velocity = mink.VelocityLimit(model, velocities)
+        keep = where[velocity.indices] >= 0
+        self._velocity_at = where[velocity.indices][keep]
+        self._velocity = np.asarray(velocity.limit, dtype=float)[keep]
+
+    def bounds(self, q: FloatArray, dt: float, velocity: bool = True) -> tuple[FloatArray, FloatArray]:
+        """(lower, upper) bounds of the free dofs' step at ``q``: range (mink's gain, bounds
+        clipped at zero as :class:`ConfigurationLimit`'s) and, if ``velocity``, ``v dt``."""
+        n = len(self.free)
+        lower, upper = np.full(n, -1e30), np.full(n, 1e30)
+        gain = self.config.gain
+        q_range = q[self._range_qadr]
+        upper[self._range_at] = np.maximum(gain * (self._upper - q_range), 0.0)
+        lower[self._range_at] = -np.maximum(gain * (q_range - self._lower), 0.0)
+        if velocity:
+            step = dt * self._velocity
+            upper[self._velocity_at] = np.minimum(upper[self._velocity_at], step)
+            lower[self._velocity_at] = np.maximum(lower[self._velocity_at], -step)
+        return lower, upper
+
+    def solve(
+        self,
+        configuration: mink.Configuration,
+        tasks: Sequence[mink.Task],
+        dt: float,
+        damping: float,
+        limits: Sequence[mink.Limit],
+        constraints: Sequence[mink.Task],
+        velocity: bool = True,
+    ) -> FloatArray:
+        """mink's IK step (``mink.solve_ik`` with these limits plus this range and, if
+        ``velocity``, velocity limit): the velocity (nv,), zero on the frozen dofs.
+
+        Raises mink.NoSolutionFound when the QP is infeasible.
+        """
+        free, n = self.free, len(self.free)
+        if tasks:
+            weighted: list[FloatArray] = []
+            errors: list[FloatArray] = []
+            mu = 0.0
+            for task in tasks:
+                residual = task.compute_qp_residual(configuration)
+                assert residual is not None  # mink's tasks here all have the J^T J form
+                jac, err, task_mu = residual
+                weighted.append(jac[:, free])
+                errors.append(err)
+                mu += task_mu
+            w = np.vstack(weighted)
+            hessian = w.T @ w
+            linear = -(np.concatenate(errors) @ w)
+        else:
+            hessian, linear, mu = np.zeros((n, n)), np.zeros(n), 0.0
+        hessian.flat[:: n + 1] += damping + mu
+        rows: list[FloatArray] = []
+        upper: list[FloatArray] = []
+        lower, high = self.bounds(configuration.q, dt, velocity)
+        bounds_low = [lower]
+        upper.append(high)
+        if self._ball_rows:
+            ball = self.config.compute_qp_inequalities(configuration, dt)
+            assert ball.G is not None and ball.h is not None
+            rows.append(ball.G[-self._ball_rows :, free])
+            upper.append(ball.h[-self._ball_rows :])
+        for limit in limits:
+            constraint = limit.compute_qp_inequalities(configuration, dt)
+            if not constraint.inactive:
+                assert constraint.G is not None and constraint.h is not None
+                rows.append(constraint.G[:, free])
+                upper.append(np.asarray(constraint.h, dtype=float))
+        inequalities = sum(len(r) for r in rows)
+        bounds_low.append(np.full(inequalities, -1e30))
+        equalities = 0
+        for task in constraints:
+            jacobian = task.compute_jacobian(configuration)[:, free]
+            rows.append(jacobian)
+            upper.append(-task.gain * task.compute_error(configuration))
+            equalities += len(jacobian)
+        bounds_low.append(np.full(equalities, -1e30))
+        matrix = np.ascontiguousarray(np.vstack(rows)) if rows else np.zeros((0, n))
+        sense = np.zeros(n + inequalities + equalities, dtype=np.intc)
+        sense[n + inequalities :] = 5  # equality (DAQP: active and immutable), as qpsolvers sets it
+        x, _obj, exitflag, _info = daqp.solve(
+            hessian, linear, matrix, np.concatenate(upper), np.concatenate(bounds_low), sense
+        )
+        if exitflag <= 0:
+            raise mink.NoSolutionFound("daqp")
+        out = np.zeros(self.model.nv)
+        out[free] = np.asarray(x) / dt
+        return out
 
 
 # --- collision pairs ------------------------------------------------------------------------
