@@ -16,7 +16,6 @@ limits into ``G dq <= h``.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -142,11 +141,11 @@ class TiltLimit(mink.Limit):
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt
         data = configuration.data
-        z = data.xmat[self.body].reshape(3, 3)[:, 2]
+        mat = data.xmat[self.body]  # row-major: z axis = (mat[2], mat[5], mat[8])
         mujoco.mj_jacBody(self.model, data, None, self._jac, self.body)
-        axis = np.cross(z, [0.0, 0.0, 1.0])
+        axis = np.array([mat[5], -mat[2], 0.0])  # z x (0, 0, 1)
         G = -(axis @ self._jac)[None, :]
-        h = np.array([self.gain * (float(z[2]) - self.min_cos)])
+        h = np.array([self.gain * (float(mat[8]) - self.min_cos)])
         return mink.Constraint(G=G, h=h)
 
 
@@ -359,17 +358,18 @@ class GeomPairCollisionLimit(mink.Limit):
         for geom, body in (attach or {}).items():
             bodies[geom] = body
         self.jac_body = bodies
-        self._fromto = np.empty(6)
-        self._jac1 = np.empty((3, model.nv))
-        self._jac2 = np.empty((3, model.nv))
+        self._fromto = np.empty((len(self.pairs), 6))  # witness segment per pair, last asked
+        self._first = np.ascontiguousarray(self.pairs[:, 0])
+        self._second = np.ascontiguousarray(self.pairs[:, 1])
         self._pair_list = [(int(a), int(b)) for a, b in self.pairs]
         self._reach = model.geom_rbound[self.pairs[:, 0]] + model.geom_rbound[self.pairs[:, 1]]
         self._cores = _Cores(model, self.pairs)
         # The last full query (every candidate within the detection distance): the qpos it was
-        # made at and, per candidate, (pair index, distance, witness fromto). The QP step that
-        # follows at the same configuration reuses it instead of asking MuJoCo again.
+        # made at and the candidates closer than the detection distance (pair index, distance;
+        # their witness segments stay in _fromto). The QP step that follows at the same
+        # configuration reuses it instead of asking MuJoCo again.
         self._cache_qpos: FloatArray | None = None
-        self._cache: list[tuple[int, float, FloatArray]] = []
+        self._cache: tuple[NDArray[np.int_], FloatArray] = (np.zeros(0, dtype=int), np.zeros(0))
 
     def distances(self, data: mujoco.MjData, cutoff: float | None = None) -> FloatArray:
         """Signed distance of every pair (capped at the detection distance).
@@ -382,17 +382,14 @@ class GeomPairCollisionLimit(mink.Limit):
         out = np.full(len(self.pairs), self.detection_distance)
         dmax = self.detection_distance
         reach = dmax if cutoff is None else min(float(cutoff), dmax)
-        full = reach >= dmax
-        cache: list[tuple[int, float, FloatArray]] = []
         model, pairs, fromto = self.model, self._pair_list, self._fromto
-        for i in self._candidates(data, reach).tolist():
+        asked = self._candidates(data, reach)
+        for i in asked.tolist():
             g1, g2 = pairs[i]
-            d = mujoco.mj_geomDistance(model, data, g1, g2, dmax, fromto)
-            out[i] = d
-            if full and d < dmax:  # the QP rows skip pairs at the detection distance
-                cache.append((i, d, fromto.copy()))
-        if full:
-            self._cache_qpos, self._cache = data.qpos.copy(), cache
+            out[i] = mujoco.mj_geomDistance(model, data, g1, g2, dmax, fromto[i])
+        if reach >= dmax:
+            near = asked[out[asked] < dmax]  # the QP rows skip pairs at the detection distance
+            self._cache_qpos, self._cache = data.qpos.copy(), (near, out[near])
         return out
 
     def _candidates(self, data: mujoco.MjData, cutoff: float | None = None) -> NDArray[np.int_]:
@@ -404,12 +401,12 @@ class GeomPairCollisionLimit(mink.Limit):
         if len(self.pairs) == 0:
             return np.zeros(0, dtype=int)
         limit = self.detection_distance if cutoff is None else cutoff
-        delta = data.geom_xpos[self.pairs[:, 0]] - data.geom_xpos[self.pairs[:, 1]]
+        delta = data.geom_xpos[self._first] - data.geom_xpos[self._second]
         gap = np.sqrt(np.einsum("ij,ij->i", delta, delta)) - self._reach
         near = np.flatnonzero(gap <= limit)
         if len(near) == 0:
             return near
-        bound = self._cores.bounds(data.geom_xpos[None], data.geom_xmat[None], np.zeros_like(near), near)
+        bound = self._cores.bounds(data.geom_xpos, data.geom_xmat, None, near)
         return near[bound <= limit]
 
     def knot_candidates(
@@ -430,46 +427,49 @@ class GeomPairCollisionLimit(mink.Limit):
         keep = self._cores.bounds(xpos, xmat, knots, pairs) <= cutoff
         return knots[keep], pairs[keep]
 
-    def _queries(self, data: mujoco.MjData) -> list[tuple[int, float, FloatArray]]:
-        """(pair, distance, fromto) of every candidate at ``data``'s configuration, from the cache
-        when the last full :meth:`distances` query was made at the same qpos."""
-        if self._cache_qpos is not None and np.array_equal(self._cache_qpos, data.qpos):
-            return self._cache
-        self.distances(data)
+    def _queries(self, data: mujoco.MjData) -> tuple[NDArray[np.int_], FloatArray]:
+        """(pairs, distances) of the candidates closer than the detection distance at ``data``'s
+        configuration (witness segments in ``_fromto``), from the cache when the last full
+        :meth:`distances` query was made at the same qpos."""
+        if self._cache_qpos is None or not np.array_equal(self._cache_qpos, data.qpos):
+            self.distances(data)
         return self._cache
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt  # a bound on the displacement, see the class docstring
         model, data = self.model, configuration.data
-        rows: list[FloatArray] = []
-        bounds: list[float] = []
-        jac1, jac2 = self._jac1, self._jac2
-        for i, dist, fromto in self._queries(data):
-            g1, g2 = self._pair_list[i]
-            if dist >= self.detection_distance:
-                continue
-            normal = fromto[3:] - fromto[:3]
-            length = math.sqrt(float(normal.dot(normal)))  # = np.linalg.norm, without its overhead
-            if length < 1e-9:  # touching: no witness direction, use the centres
-                normal = data.geom_xpos[g2] - data.geom_xpos[g1]
-                length = math.sqrt(float(normal.dot(normal)))
-                if length < 1e-9:
-                    continue
-            normal = normal / length
-            if dist < 0:  # penetrating: fromto points run the other way (mink flips the sign too)
-                normal = -normal
-            # Contact-normal Jacobian of the witness points (mink's compute_contact_normal_jacobian).
-            mujoco.mj_jac(model, data, jac1, None, fromto[:3], int(self.jac_body[g1]))
-            mujoco.mj_jac(model, data, jac2, None, fromto[3:], int(self.jac_body[g2]))
-            rows.append(-(normal @ (jac2 - jac1)))
-            gap = dist - float(self.min_distance[i])
-            # The QP variable of mink.build_ik is the displacement dq = v dt, so the damper bounds
-            # the approach per step by gain * gap (mink's own limit divides by dt as well, which
-            # for dt < 1 lets a step close more than the whole gap).
-            bounds.append(self.gain * gap if gap > 0 else -min(-self.gain * gap, self.recovery))
-        if not rows:
+        near, dist = self._queries(data)
+        if len(near) == 0:
             return mink.Constraint()
-        return mink.Constraint(G=np.vstack(rows), h=np.array(bounds))
+        fromto = self._fromto[near]
+        normal = fromto[:, 3:] - fromto[:, :3]
+        length = np.sqrt(np.einsum("ij,ij->i", normal, normal))
+        touching = length < 1e-9  # no witness direction: use the centres
+        if np.any(touching):
+            centres = data.geom_xpos[self._second[near]] - data.geom_xpos[self._first[near]]
+            normal[touching] = centres[touching]
+            length[touching] = np.sqrt(np.einsum("ij,ij->i", centres, centres))[touching]
+        keep = length >= 1e-9
+        if not np.all(keep):
+            near, dist, fromto = near[keep], dist[keep], fromto[keep]
+            normal, length = normal[keep], length[keep]
+            if len(near) == 0:
+                return mink.Constraint()
+        # Penetrating: fromto points run the other way (mink flips the sign too).
+        normal *= (np.where(dist < 0, -1.0, 1.0) / length)[:, None]
+        # Contact-normal Jacobian of the witness points (mink's compute_contact_normal_jacobian).
+        jac = np.empty((len(near), 2, 3, model.nv))
+        for k, i in enumerate(near.tolist()):
+            g1, g2 = self._pair_list[i]
+            mujoco.mj_jac(model, data, jac[k, 0], None, fromto[k, :3], int(self.jac_body[g1]))
+            mujoco.mj_jac(model, data, jac[k, 1], None, fromto[k, 3:], int(self.jac_body[g2]))
+        rows = -np.einsum("ni,nij->nj", normal, jac[:, 1] - jac[:, 0])
+        gap = dist - self.min_distance[near]
+        # The QP variable of mink.build_ik is the displacement dq = v dt, so the damper bounds
+        # the approach per step by gain * gap (mink's own limit divides by dt as well, which
+        # for dt < 1 lets a step close more than the whole gap). Inside d_min: see the class doc.
+        bounds = np.where(gap > 0, self.gain * gap, -np.minimum(-self.gain * gap, self.recovery))
+        return mink.Constraint(G=rows, h=bounds)
 
 
 class _Cores:
@@ -481,6 +481,9 @@ class _Cores:
     ball (spheres; any other shape: its bounding sphere), and the distance from that shape to
     the other geom's bounding sphere bounds the pair's distance from below; the larger of the
     two ways round is taken. Planes, height fields and SDFs have no bound (always asked).
+
+    All three shapes are a box of half sizes ``half`` (zero for a ball, zero but along z for a
+    capsule's segment) grown by ``radius`` (zero for a box), so one formula serves them all.
     """
 
     def __init__(self, model: mujoco.MjModel, pairs: NDArray[np.int_]) -> None:
@@ -501,42 +504,45 @@ class _Cores:
         self.second = np.concatenate([pairs[:, 1], pairs[:, 0]]).astype(int)
         kind = model.geom_type[self.first]
         size = model.geom_size[self.first]
-        self.box = kind == box
-        self.capsule = (kind == capsule) | (kind == cylinder)
-        self.half = np.where(self.box[:, None], size, 0.0)  # box half sizes
-        self.length = np.where(self.capsule, size[:, 1], 0.0)  # capsule half length
-        # Radius of a capsule, a sphere, or (other shapes) the bounding sphere.
-        self.radius = np.where(self.capsule | (kind == sphere), size[:, 0], model.geom_rbound[self.first])
-        self.radius = np.where(self.box, 0.0, self.radius)
-        self.reach = model.geom_rbound[self.second]
+        is_box = kind == box
+        is_capsule = (kind == capsule) | (kind == cylinder)
+        self.half = np.zeros((len(kind), 3))
+        self.half[is_box] = size[is_box]
+        self.half[is_capsule, 2] = size[is_capsule, 1]
+        radius = np.where(is_capsule | (kind == sphere), size[:, 0], model.geom_rbound[self.first])
+        radius[is_box] = 0.0
         other = model.geom_type[self.second]
-        self.unbounded = np.zeros(len(kind), dtype=bool)
+        # The other geom's bounding sphere, and no bound at all (-inf) for unbounded shapes.
+        self.shrink = radius + model.geom_rbound[self.second]
         for unbounded in (plane, hfield, sdf):
-            self.unbounded |= (kind == unbounded) | (other == unbounded)
+            self.shrink[(kind == unbounded) | (other == unbounded)] = np.inf
         self.count = len(pairs)
 
     def bounds(
-        self, xpos: FloatArray, xmat: FloatArray, knots: NDArray[np.int_], pairs: NDArray[np.int_]
+        self,
+        xpos: FloatArray,
+        xmat: FloatArray,
+        knots: NDArray[np.int_] | None,
+        pairs: NDArray[np.int_],
     ) -> FloatArray:
-        """Lower bounds (m) on the distance of ``pairs`` at configurations ``knots``.
+        """Lower bounds (m) on the distance of ``pairs``.
 
-        ``xpos`` (K, ngeom, 3), ``xmat`` (K, ngeom, 9): the geoms' poses at K configurations.
+        ``xpos`` (K, ngeom, 3), ``xmat`` (K, ngeom, 9): the geoms' poses at K configurations,
+        ``knots`` the configuration of each pair; or ``knots`` None and ``xpos`` (ngeom, 3),
+        ``xmat`` (ngeom, 9) at one configuration.
         """
         both = np.concatenate([pairs, pairs + self.count])
-        at = np.concatenate([knots, knots])
         first, second = self.first[both], self.second[both]
-        offset = xpos[at, second] - xpos[at, first]
+        if knots is None:
+            offset = xpos[second] - xpos[first]
+            axes = xmat[first]
+        else:
+            at = np.concatenate([knots, knots])
+            offset = xpos[at, second] - xpos[at, first]
+            axes = xmat[at, first]
         # The offset in the first geom's frame (xmat is row-major: its columns are the axes).
-        local = np.einsum("nij,ni->nj", xmat[at, first].reshape(-1, 3, 3), offset)
-        outside = np.maximum(np.abs(local) - self.half[both], 0.0)  # a box: the excess per axis
-        capsule = self.capsule[both]
-        axial = np.clip(local[:, 2], -self.length[both], self.length[both])
-        outside[capsule, 2] = local[capsule, 2] - axial[capsule]  # a capsule: off its segment
-        outside[capsule, :2] = local[capsule, :2]
-        box = self.box[both]
-        outside[~box & ~capsule] = local[~box & ~capsule]  # a ball: the whole offset
-        core = np.sqrt(np.einsum("ni,ni->n", outside, outside)) - self.radius[both]
-        bound = core - self.reach[both]
-        bound[self.unbounded[both]] = -np.inf
+        local = np.einsum("nij,ni->nj", axes.reshape(-1, 3, 3), offset)
+        outside = np.maximum(np.abs(local) - self.half[both], 0.0)
+        bound = np.sqrt(np.einsum("ni,ni->n", outside, outside)) - self.shrink[both]
         half = len(pairs)
         return np.asarray(np.maximum(bound[:half], bound[half:]), dtype=float)
