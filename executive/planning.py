@@ -45,6 +45,7 @@ and are re-exported here.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Sequence
 
@@ -432,18 +433,22 @@ class Planner:
         """
         cfg, data = self.config, self.configuration.data
         for side, goal in goals.items():
-            pose = site_pose(data, self.world.ids.hand_sites[side])
-            delta = goal.translation() - pose.translation()
-            turn = (pose.rotation().inverse() @ goal.rotation()).log()
+            site = self.world.ids.hand_sites[side]
+            position, quat = data.site_xpos[site], _site_quat(data, site)
+            delta = goal.wxyz_xyz[4:] - position
+            turn = _rotation_log(quat, goal.wxyz_xyz[:4])  # hand to goal, in the hand frame
             dist, ang = float(np.linalg.norm(delta)), float(np.linalg.norm(turn))
             alpha = min(1.0, cfg.lead_distance / max(dist, 1e-12), cfg.lead_angle_rad / max(ang, 1e-12))
             if alpha >= 1.0:
                 self.hands[side].set_target(goal)
                 continue
-            rotation = pose.rotation() @ mink.SO3.exp(alpha * turn)
-            self.hands[side].set_target(
-                mink.SE3.from_rotation_and_translation(rotation, pose.translation() + alpha * delta)
-            )
+            # mink.SO3.exp and the product, with the same MuJoCo routines mink uses.
+            axis = alpha * turn
+            theta = mujoco.mju_normalize3(axis)
+            step, rotation = np.empty(4), np.empty(4)
+            mujoco.mju_axisAngle2Quat(step, axis, theta)
+            mujoco.mju_mulQuat(rotation, quat, step)
+            self.hands[side].set_target(mink.SE3(np.concatenate([rotation, position + alpha * delta])))
 
     def _solve(
         self,
@@ -510,7 +515,7 @@ class Planner:
             drift = max(float(np.linalg.norm(f.compute_error(conf))) for f in self.feet)
             if drift < cfg.feet_tolerance:
                 return
-            velocity = self.joints.solve(conf, [], cfg.ik_dt, 1.0, [], self.feet, velocity=False)
+            velocity = self.joints.project(conf, self.feet, cfg.ik_dt)
             conf.integrate_inplace(velocity, cfg.ik_dt)
             conf.update()
 
@@ -538,13 +543,13 @@ class Planner:
                 raise PlanningInputError(f"carried object '{obj}' is not in the world; objects are: {objs}")
 
     def _errors(self, goals: dict[str, mink.SE3]) -> dict[str, tuple[float, float]]:
+        """Per hand: distance (m) and rotation angle (rad) from its goal."""
         data = self.configuration.data
         out = {}
         for side, goal in goals.items():
-            pose = site_pose(data, self.world.ids.hand_sites[side])
-            pos = float(np.linalg.norm(pose.translation() - goal.translation()))
-            ang = float(np.linalg.norm((goal.rotation().inverse() @ pose.rotation()).log()))
-            out[side] = (pos, ang)
+            site = self.world.ids.hand_sites[side]
+            pos = float(np.linalg.norm(data.site_xpos[site] - goal.wxyz_xyz[4:]))
+            out[side] = (pos, _rotation_angle(goal.wxyz_xyz[:4], _site_quat(data, site)))
         return out
 
     def _arrived(self, errors: dict[str, tuple[float, float]]) -> bool:
@@ -564,3 +569,37 @@ class Planner:
 
 
 # --- small helpers --------------------------------------------------------------------------
+
+
+def _site_quat(data: mujoco.MjData, site: int) -> FloatArray:
+    """A site's world orientation (w x y z), as mink's SO3.from_matrix makes it."""
+    quat = np.empty(4)
+    mujoco.mju_mat2Quat(quat, data.site_xmat[site])
+    return quat
+
+
+def _relative(a: FloatArray, b: FloatArray) -> FloatArray:
+    """a^-1 b of two unit quaternions, sign-fixed to w >= 0 as mink's SO3.log does."""
+    inverse, out = np.empty(4), np.empty(4)
+    mujoco.mju_negQuat(inverse, a)
+    mujoco.mju_mulQuat(out, inverse, b)
+    return out * np.sign(out[0])
+
+
+def _rotation_log(a: FloatArray, b: FloatArray) -> FloatArray:
+    """``(SO3(a).inverse() @ SO3(b)).log()`` of mink: the rotation vector from a to b."""
+    q = _relative(a, b)
+    v = q[1:].copy()
+    norm = mujoco.mju_normalize3(v)
+    if norm < 1e-10:  # mink's epsilon for float64
+        return np.zeros(3)
+    return np.asarray(2.0 * math.atan2(norm, float(q[0])) * v, dtype=float)
+
+
+def _rotation_angle(a: FloatArray, b: FloatArray) -> float:
+    """The norm of :func:`_rotation_log`: the angle (rad) between the two orientations."""
+    q = _relative(a, b)
+    norm = math.sqrt(float(q[1] * q[1] + q[2] * q[2] + q[3] * q[3]))
+    if norm < 1e-10:
+        return 0.0
+    return 2.0 * math.atan2(norm, float(q[0]))

@@ -214,6 +214,30 @@ class JointBounds:
             lower[self._velocity_at] = np.maximum(lower[self._velocity_at], -step)
         return lower, upper
 
+    def project(
+        self, configuration: mink.Configuration, constraints: Sequence[mink.Task], dt: float
+    ) -> FloatArray:
+        """``solve(configuration, [], dt, 1.0, [], constraints, velocity=False)``: the least-norm
+        step that meets the constraints (within the joint ranges), as a velocity (nv,).
+
+        Without the ranges that step is ``A^T (A A^T)^-1 b``; when it keeps within them it is
+        the QP's solution, else the QP is solved.
+        """
+        free = self.free
+        rows = [task.compute_jacobian(configuration)[:, free] for task in constraints]
+        target = [-task.gain * task.compute_error(configuration) for task in constraints]
+        matrix, rhs = np.vstack(rows), np.concatenate(target)
+        try:
+            x = matrix.T @ np.linalg.solve(matrix @ matrix.T, rhs)
+        except np.linalg.LinAlgError:
+            return self.solve(configuration, [], dt, 1.0, [], constraints, velocity=False)
+        lower, upper = self.bounds(configuration.q, dt, velocity=False)
+        if not (np.all(x >= lower) and np.all(x <= upper)):
+            return self.solve(configuration, [], dt, 1.0, [], constraints, velocity=False)
+        out = np.zeros(self.model.nv)
+        out[free] = x / dt
+        return out
+
     def solve(
         self,
         configuration: mink.Configuration,
