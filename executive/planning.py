@@ -341,9 +341,8 @@ class Planner:
         while not (self._arrived(errors) and all(stage[s] == len(goals[s]) - 1 for s in goals)):
             if iterations >= cfg.max_iterations:
                 self._fail(name, errors, iterations)
-            if self._stalled(history, cfg.relax_iterations):
-                if relax <= cfg.relax_floor:
-                    self._fail(name, errors, iterations)
+            if relax > cfg.relax_floor and self._stalled(history, cfg.relax_iterations):
+                # Short of the floor a short stall relaxes; at the floor only a long stall fails.
                 relax *= cfg.relax_factor
                 self.posture.set_cost(np.where(idle_dofs, posture_cost, posture_cost * relax))
                 history = history[-1:]

@@ -88,9 +88,12 @@ class PlannerConfig:
         max_iterations: IK steps per move before a PlanningError.
         relax_iterations, relax_factor, relax_floor: when the hands' error improved less
             than ``stall_improvement`` over ``relax_iterations`` steps short of the
-            tolerance (the soft posture and CoM tasks hold them back), scale those tasks'
-            costs by ``relax_factor``, down to ``relax_floor`` of their defaults. The hard
-            limits (CoM in the support polygon, clearance) are not relaxed.
+            tolerance (the soft posture task holds them back), scale the posture task's
+            costs by ``relax_factor``, until they are below ``relax_floor`` of their
+            defaults. The hard limits (CoM in the support polygon, clearance) are not
+            relaxed. A short window relaxes early (a hand creeping towards its goal against
+            the posture task costs IK steps and path length); once relaxed to the floor,
+            only ``stall_iterations`` decide that the hands cannot get closer.
         stall_iterations, stall_improvement: stop early (and raise) when the worst
             hand's error (m + rad) improved less than ``stall_improvement`` over the
             last ``stall_iterations`` steps.
@@ -146,8 +149,8 @@ class PlannerConfig:
     position_tolerance: float = 0.002
     angle_tolerance_rad: float = float(np.radians(1.0))
     max_iterations: int = 600
-    relax_iterations: int = 8
-    relax_factor: float = 0.1
+    relax_iterations: int = 3
+    relax_factor: float = 0.05
     relax_floor: float = 1e-3
     stall_iterations: int = 60
     stall_improvement: float = 1e-4
