@@ -2,8 +2,9 @@
 
 The behaviours never step physics. Each tick they set targets on a
 :class:`SimulatedRobot`; the host then calls :meth:`SimulatedRobot.advance`,
-which steps MuJoCo for one control period at the model's timestep and runs the
-failure detectors after every physics step.
+which steps MuJoCo for one control period at the model's timestep, with the
+failure detectors' contact check after every physics step and their full check
+at the end of the period.
 """
 
 from __future__ import annotations
@@ -255,7 +256,9 @@ class SimulatedRobot:
     def advance(self) -> Failure | None:
         """Step physics for one control period; stop early at the first detected failure.
 
-        The failure detectors run after every physics step. The servo targets are those of
+        The detectors look at the contacts after every physics step
+        (:meth:`FailureDetector.check_contacts`) and at the whole state after the period's last
+        step (:meth:`FailureDetector.check`). The servo targets are those of
         :meth:`JointTargetController.joint_ctrl` for each step (the target ramps on at
         ``qvel_target``, the arm/waist gravity feed-forward is the step's ``qfrc_bias``); the
         parts fixed over the period are computed once (:meth:`JointTargetController.period`).
@@ -273,13 +276,13 @@ class SimulatedRobot:
         ctrl = data.ctrl
         for side, values in self.gripper_ctrl.items():  # fixed over the period
             ctrl[self._gripper_idx[side]] = values
-        write, check = servo.write, self.detector.check
-        steps = 0
+        write, check_contacts = servo.write, self.detector.check_contacts
+        steps, last = 0, self.substeps - 1
         for k in range(self.substeps):
             write(k, data)
             mujoco.mj_step(model, data)
             steps += 1
-            if check() is not None:
+            if (check_contacts() if k < last else self.detector.check()) is not None:
                 self.hold()
                 break
         self.stats.physics_steps += steps

@@ -177,7 +177,13 @@ class _StackOnTheHandForOneStep:
         return self.inner.failure
 
     def check(self):  # type: ignore[no-untyped-def]
-        found = self.inner.check()
+        return self._look(self.inner.check)
+
+    def check_contacts(self):  # type: ignore[no-untyped-def]
+        return self._look(self.inner.check_contacts)
+
+    def _look(self, inner_check):  # type: ignore[no-untyped-def]
+        found = inner_check()
         self.seen.append(found is not None)
         if len(self.seen) == 4:
             _stack_onto_left_hand(self.world)
