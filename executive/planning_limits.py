@@ -382,6 +382,8 @@ class GeomPairCollisionLimit(mink.Limit):
         for geom, body in (attach or {}).items():
             bodies[geom] = body
         self.jac_body = bodies
+        # Geoms welded to the world (table, obstacles) have a zero Jacobian: not asked of MuJoCo.
+        self._moves = model.body_weldid[bodies] != 0
         self._fromto = np.empty((len(self.pairs), 6))  # witness segment per pair, last asked
         self._first = np.ascontiguousarray(self.pairs[:, 0])
         self._second = np.ascontiguousarray(self.pairs[:, 1])
@@ -445,9 +447,15 @@ class GeomPairCollisionLimit(mink.Limit):
         if len(self.pairs) == 0 or len(xpos) == 0:
             empty = np.zeros(0, dtype=int)
             return empty, empty
-        delta = xpos[:, self.pairs[:, 0]] - xpos[:, self.pairs[:, 1]]
-        gap = np.sqrt(np.einsum("kij,kij->ki", delta, delta)) - self._reach
+        # Pairs whose centres' boxes over all K configurations stay apart are never near.
+        lo, hi = xpos.min(axis=0), xpos.max(axis=0)
+        first, second = self._first, self._second
+        apart = np.maximum(np.maximum(lo[first] - hi[second], lo[second] - hi[first]), 0.0)
+        some = np.flatnonzero(np.sqrt(np.einsum("ij,ij->i", apart, apart)) - self._reach <= cutoff)
+        delta = xpos[:, first[some]] - xpos[:, second[some]]
+        gap = np.sqrt(np.einsum("kij,kij->ki", delta, delta)) - self._reach[some]
         knots, pairs = np.nonzero(gap <= cutoff)
+        pairs = some[pairs]
         keep = self._cores.bounds(xpos, xmat, knots, pairs) <= cutoff
         return knots[keep], pairs[keep]
 
@@ -482,11 +490,14 @@ class GeomPairCollisionLimit(mink.Limit):
         # Penetrating: fromto points run the other way (mink flips the sign too).
         normal *= (np.where(dist < 0, -1.0, 1.0) / length)[:, None]
         # Contact-normal Jacobian of the witness points (mink's compute_contact_normal_jacobian).
-        jac = np.empty((len(near), 2, 3, model.nv))
+        jac = np.zeros((len(near), 2, 3, model.nv))
+        moves, body = self._moves, self.jac_body
         for k, i in enumerate(near.tolist()):
             g1, g2 = self._pair_list[i]
-            mujoco.mj_jac(model, data, jac[k, 0], None, fromto[k, :3], int(self.jac_body[g1]))
-            mujoco.mj_jac(model, data, jac[k, 1], None, fromto[k, 3:], int(self.jac_body[g2]))
+            if moves[g1]:
+                mujoco.mj_jac(model, data, jac[k, 0], None, fromto[k, :3], int(body[g1]))
+            if moves[g2]:
+                mujoco.mj_jac(model, data, jac[k, 1], None, fromto[k, 3:], int(body[g2]))
         rows = -np.einsum("ni,nij->nj", normal, jac[:, 1] - jac[:, 0])
         gap = dist - self.min_distance[near]
         # The QP variable of mink.build_ik is the displacement dq = v dt, so the damper bounds

@@ -242,36 +242,32 @@ def build_trajectory(
     cutoff = float(np.max(floor)) if len(floor) else 0.0
     at, pairs = collisions.knot_candidates(knots.geom_xpos, knots.geom_xmat, cutoff)
     fromto = np.empty(6)
-    starts = np.flatnonzero(np.diff(at, prepend=-1))  # each knot's first candidate
-    ends = [*starts[1:].tolist(), len(at)][: len(starts)]
-    for lo, hi in zip(starts.tolist(), ends, strict=True):
-        k = int(at[lo])
-        data.qpos[:] = qpos[k]
-        mujoco.mj_kinematics(model, data)
-        asked = pairs[lo:hi]
-        gaps = (
-            np.array(
-                [
-                    mujoco.mj_geomDistance(model, data, g1, g2, collisions.detection_distance, fromto)
-                    for g1, g2 in collisions.pairs[asked].tolist()
-                ]
-            )
-            - floor[asked]
+    distance = np.empty(len(at))
+    dmax = collisions.detection_distance
+    last = -1
+    for j, (k, g1, g2) in enumerate(zip(at.tolist(), *collisions.pairs[pairs].T.tolist(), strict=True)):
+        if k != last:
+            data.qpos[:] = qpos[k]
+            mujoco.mj_kinematics(model, data)
+            last = k
+        distance[j] = mujoco.mj_geomDistance(model, data, g1, g2, dmax, fromto)
+    gaps = distance - floor[pairs]
+    if np.any(gaps < 0):
+        k = int(at[np.argmax(gaps < 0)])  # the first knot that breaks a clearance, its worst pair
+        at_k = np.flatnonzero(at == k)
+        j = int(at_k[np.argmin(gaps[at_k])])
+        i = int(pairs[j])
+        n1, n2 = (str(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)) for g in collisions.pairs[i])
+        raise PlanningError(
+            name,
+            None,
+            0.0,
+            0.0,
+            len(path) - 1,
+            f"motion '{name}': geoms '{n1}' and '{n2}' come within "
+            f"{distance[j]:.4f} m at t = {times[k]:.2f} s "
+            f"(clearance {floor[i] + cfg.clearance_tolerance:.3f} m)",
         )
-        if np.any(gaps < 0):
-            worst_pair = int(np.argmin(gaps))
-            i = int(asked[worst_pair])
-            n1, n2 = (str(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)) for g in collisions.pairs[i])
-            raise PlanningError(
-                name,
-                None,
-                0.0,
-                0.0,
-                len(path) - 1,
-                f"motion '{name}': geoms '{n1}' and '{n2}' come within "
-                f"{gaps[worst_pair] + floor[i]:.4f} m at t = {times[k]:.2f} s "
-                f"(clearance {floor[i] + cfg.clearance_tolerance:.3f} m)",
-            )
     worst = float(np.min(polygon.margins(com)))
     if worst < cfg.support_margin - 1e-9:
         raise PlanningError(
