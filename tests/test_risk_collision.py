@@ -388,3 +388,49 @@ def test_one_half_plane_is_the_closed_form_and_two_the_quadrature() -> None:
     assert gaussian_union_probability(np.array([[0.0, 2.0]]), np.array([3.0])) == norm.cdf(-1.5)
     two = gaussian_union_probability(np.array([[1.0, 0.0], [0.0, 1.0]]), np.array([1.0, 2.0]))
     assert two == pytest.approx(1.0 - norm.cdf(1.0) * norm.cdf(2.0), abs=1e-6)  # 720-angle midpoint rule
+
+
+def test_the_other_hand_near_a_carried_object_is_a_pair_with_the_objects_own_sigma(
+    world: World, cmodel: CollisionModel
+) -> None:
+    """A handover's receiver rises beside the book the giver holds: that hand is not allowed to
+    touch it (the failure detector calls it a collision), so the model measures it. Reference:
+    MuJoCo's mj_geomDistance between the right hand's geoms and the book at every knot; the
+    first-order probability of the closest such pair is Phi(-d / sigma_object) (the hand's pose
+    is known, the book's in the hand is not)."""
+    from executive.composition import plan_alternative
+    from executive.planning import Planner
+
+    scenario = world.scenario
+    plan = plan_alternative(Planner(world), world, scenario.mission[0], "left_to_right")
+    step = next(s for s in plan.steps if s.name == "right.rise")
+    traj = plan.trajectories[step.name]
+    assert traj.carried == ("left", "book")
+    allow = cmodel.step_allow(step.side, step.kind, "book", step.allow_contact, traj.carried)
+    book = world.ids.object_geoms["book"]
+    names = {world.model.geom(g).name for g in world.ids.robot_geoms}
+    assert not any(pair[1] == "book" and pair[0].startswith("right") for pair in allow)
+    assert any(pair[1] == "book" and pair[0].startswith("left") for pair in allow)  # the holder
+    assert all(pair[0] in names for pair in allow if pair[1] == "book")
+    profile = cmodel.profile(traj, allow=allow)
+    model, data = world.model, mujoco.MjData(world.model)
+    right = [g for g in world.ids.robot_geoms if model.geom_bodyid[g] in set(world.ids.hand_bodies["right"])]
+    reference, modelled, closest = [], [], None
+    for q, knot in zip(traj.qpos, profile.knots, strict=True):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        reference.append(min(mujoco.mj_geomDistance(model, data, g, book, 0.2, None) for g in right))
+        pairs = [p for p in knot.near if p.env_geom == book and p.robot_geom in right]
+        modelled.append(min((p.distance for p in pairs), default=np.inf))
+        for p in pairs:
+            if closest is None or p.distance < closest.distance:
+                closest = p
+    reference_min, modelled_min = min(reference), min(modelled)
+    print(f"right hand to the held book in right.rise: coal {modelled_min:.4f}, MuJoCo {reference_min:.4f} m")
+    assert reference_min < 0.05  # the rise does pass near the book
+    assert modelled_min == pytest.approx(reference_min, abs=1e-3)
+    # the closest pair alone, to first order along its normal's horizontal part: a lower bound
+    assert closest is not None
+    sigma_n = scenario.uncertainty.object_position * float(np.hypot(*closest.normal[:2]))
+    report = report_from_profile(cmodel, profile)
+    assert report.probability >= norm.cdf(-closest.distance / sigma_n) * (1 - 1e-6) > 1e-4

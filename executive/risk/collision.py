@@ -28,8 +28,10 @@ half-plane contains the true collision set (measured: ball round a box edge
 0.0062 vs 0.0050 sampled; a book sliding past the stack's corner 0.032 vs 0.022).
 
 Pairs: every robot geom (plus the carried object's geom, which moves to the
-robot side) against the table, obstacles and objects not carried; the floor is
-never a pair (feet stand on it) and robot-robot pairs are not considered.
+robot side) against the table, obstacles and objects not carried, and the
+carried object against the robot's own geoms (its own pose error is that
+pair's sigma; the holding hand is allowed by the step); the floor is never a
+pair (feet stand on it) and robot-robot pairs are not considered.
 ``allow`` removes pairs per query: an environment geom/body name, or a (robot
 geom/body, environment geom/body) pair; see :meth:`CollisionModel.hand_allow`
 (the hand vs the object it grasps) and :meth:`CollisionModel.support_allow`
@@ -444,12 +446,15 @@ class CollisionModel:
         allow_contact: tuple[str, ...],
         carried: tuple[str, str] | None,
     ) -> frozenset[tuple[str, str]]:
-        """Pairs a motion step may bring into contact: the hand the object it grasps (and any hand
-        what it carries), and a carried object its support while lifted or placed."""
+        """Pairs a motion step may bring into contact: the hand the object it grasps (a step whose
+        ``allow_contact`` names it), the hand what it carries, and a carried object its support
+        while lifted or placed. The other hand near a carried object (a handover's receiver
+        rising beside it) is not allowed: the failure detector calls that touch a collision."""
         allow: set[tuple[str, str]] = set()
-        if obj in allow_contact or carried is not None:
-            for hand, held in [(side, obj), *([carried] if carried else [])]:
-                allow |= self.hand_allow(hand, held)
+        if obj in allow_contact:
+            allow |= self.hand_allow(side, obj)
+        if carried is not None:
+            allow |= self.hand_allow(*carried)
         if kind in ("lift", "place"):
             allow |= self.support_allow(obj)
         return frozenset(allow)
@@ -473,9 +478,16 @@ class CollisionModel:
         carried_geom = self._object_geom(carried) if carried is not None else None
         robot: list[int] = [g for g in self.setup.robot_geoms if g in self._shapes]
         env = [g for g in self.setup.env_geoms if g in self._shapes and g != carried_geom]
-        if carried_geom is not None and carried_geom in self._shapes:
+        carried_row = carried_geom is not None and carried_geom in self._shapes
+        if carried_geom is not None and carried_row:
+            # The carried object is on the robot side against the scene, and on the scene side
+            # against the robot's own geoms (the other hand may come near it; the holding hand's
+            # pairs are allowed by the step). Its own pose error is then that pair's sigma.
             robot.append(carried_geom)
+            env.append(carried_geom)
         mask = np.ones((len(env), len(robot)), dtype=bool)
+        if carried_row:
+            mask[-1, -1] = False  # the object against itself
         for item in allow:
             if isinstance(item, str):
                 cols = self._resolve(item, env)
