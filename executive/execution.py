@@ -34,6 +34,7 @@ class JointTargetController:
 
     * arm and waist joints: ``qfrc_bias`` of the current state, the gravity of the
       links they carry (no contact term: a contact on the arm is not pushed against);
+      :meth:`period` holds it over a control period;
     * leg joints: for a floating-base robot ``g`` of a leg joint is only the weight of
       the links *below* it; the body the stance leg carries reaches it through the
       floor's support. The support wrenches ``f`` (one per foot, at the foot body) are
@@ -130,14 +131,16 @@ class JointTargetController:
         qvel_target: FloatArray | None,
         steps: int,
         timestep: float,
+        data: mujoco.MjData,
     ) -> ServoPeriod:
         """:meth:`joint_ctrl` for the ``steps`` physics steps of one control period, prepared at once.
 
-        Step ``k`` servos to ``q_target + k timestep qvel_target`` (the ramp) with the step's
-        ``qfrc_bias`` as the arm/waist feed-forward. Everything but ``qfrc_bias`` is known at
-        the start of the period, so it is computed here for all steps in one go;
-        :meth:`ServoPeriod.write` adds the bias of the step. The arithmetic (operands, order,
-        rounding) is that of :meth:`joint_ctrl`, so the servo targets are bit for bit equal.
+        Step ``k`` servos to ``q_target + k timestep qvel_target`` (the ramp); the arm/waist
+        feed-forward is ``data.qfrc_bias`` at the start of the period, held for its steps (the
+        gravity torque of an arm moving at 1 rad/s changes by about 2 % of itself in a 20 ms
+        period; the servo's stiffness takes up the rest). Row ``k`` is bit for bit
+        ``joint_ctrl(q_target + k timestep qvel_target, data, leg_load, qvel_target)`` with
+        ``data`` as it is now.
         """
         qadr = self.qpos_adr
         base = np.broadcast_to(q_target[qadr], (steps, len(qadr)))
@@ -145,43 +148,27 @@ class JointTargetController:
             v = qvel_target[qadr]
             ramp = (np.arange(steps) * timestep)[:, None] * v[None, :]
             base = (base + ramp) + self.kv / self.kp * v
-        # Legs: the model-based load of the target; no feed-forward: + 0.0 (exact); the arms
-        # and waist get qfrc_bias / kp per step.
-        fixed = np.where(self.support, leg_load / self.kp, 0.0)
+        # The arithmetic (operands, order, rounding) of joint_ctrl: legs get the model-based
+        # load of the target, arms and waist qfrc_bias, the rest + 0.0 (exact).
+        load = np.where(self.support, 0.0, data.qfrc_bias[self.dof_adr])
+        load += leg_load
+        fixed = load / self.kp
         fixed[~self.feed_forward] = 0.0
-        base = base + fixed
-        return ServoPeriod(self, base)
+        ctrl = np.clip(base + fixed, self.ctrl_low, self.ctrl_high)
+        return ServoPeriod(self.actuators, ctrl, moving=qvel_target is not None)
 
 
 class ServoPeriod:
-    """One control period of :class:`JointTargetController`: writes each physics step's servo ctrl.
+    """One control period of :class:`JointTargetController`: the servo ctrl of each physics step."""
 
-    The targets of the leg joints (and of any servo without feed-forward) are complete for
-    every step; the arm and waist servos add ``qfrc_bias / kp`` of the step in :meth:`write`.
-    """
-
-    def __init__(self, controller: JointTargetController, base: FloatArray) -> None:
-        c = controller
-        bias = c.feed_forward & ~c.support
-        fixed = ~bias
-        self._fixed_act = c.actuators[fixed]
-        self._fixed_ctrl = np.clip(base[:, fixed], c.ctrl_low[fixed], c.ctrl_high[fixed])
-        self._bias_act = c.actuators[bias]
-        self._bias_dof = c.dof_adr[bias]
-        self._bias_kp = c.kp[bias]
-        self._bias_base = base[:, bias]
-        self._bias_low, self._bias_high = c.ctrl_low[bias], c.ctrl_high[bias]
+    def __init__(self, actuators: NDArray[np.int_], ctrl: FloatArray, *, moving: bool) -> None:
+        self.actuators = actuators
+        self.ctrl = ctrl  # (steps, len(actuators))
+        self.moving = moving  # False: every row is the same
 
     def write(self, k: int, data: mujoco.MjData) -> None:
         """Servo ctrl of the period's ``k``-th physics step into ``data.ctrl``."""
-        ctrl = data.ctrl
-        ctrl[self._fixed_act] = self._fixed_ctrl[k]
-        u = data.qfrc_bias[self._bias_dof]
-        u /= self._bias_kp
-        u += self._bias_base[k]
-        np.maximum(u, self._bias_low, out=u)  # np.clip, without its wrapper's overhead
-        np.minimum(u, self._bias_high, out=u)
-        ctrl[self._bias_act] = u
+        data.ctrl[self.actuators] = self.ctrl[k]
 
 
 @dataclass
@@ -260,8 +247,9 @@ class SimulatedRobot:
         (:meth:`FailureDetector.check_contacts`) and at the whole state after the period's last
         step (:meth:`FailureDetector.check`). The servo targets are those of
         :meth:`JointTargetController.joint_ctrl` for each step (the target ramps on at
-        ``qvel_target``, the arm/waist gravity feed-forward is the step's ``qfrc_bias``); the
-        parts fixed over the period are computed once (:meth:`JointTargetController.period`).
+        ``qvel_target``; the arm/waist gravity feed-forward is ``qfrc_bias`` at the start of the
+        period), all computed at once (:meth:`JointTargetController.period`); a fixed target
+        writes them once.
         """
         data, model = self.data, self.model
         start = time.perf_counter()
@@ -272,14 +260,18 @@ class SimulatedRobot:
             self.qvel_target if moving else None,
             self.substeps,
             model.opt.timestep,
+            data,
         )
         ctrl = data.ctrl
         for side, values in self.gripper_ctrl.items():  # fixed over the period
             ctrl[self._gripper_idx[side]] = values
-        write, check_contacts = servo.write, self.detector.check_contacts
+        acts, rows = servo.actuators, servo.ctrl
+        ctrl[acts] = rows[0]
+        check_contacts = self.detector.check_contacts
         steps, last = 0, self.substeps - 1
         for k in range(self.substeps):
-            write(k, data)
+            if k and moving:
+                ctrl[acts] = rows[k]
             mujoco.mj_step(model, data)
             steps += 1
             if (check_contacts() if k < last else self.detector.check()) is not None:

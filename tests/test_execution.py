@@ -122,7 +122,7 @@ def test_handover_of_an_object_whose_yaw_matters_does_not_plan() -> None:
 
 def test_servo_period_writes_joint_ctrl_bit_for_bit_at_every_physics_step() -> None:
     """``advance`` prepares a control period at once; each step's ctrl must still be exactly
-    ``joint_ctrl`` of the ramped target with that step's ``qfrc_bias`` (the per-step formula)."""
+    ``joint_ctrl`` of the ramped target with the ``qfrc_bias`` of the period's start."""
     import mujoco
 
     from executive.execution import SimulatedRobot
@@ -139,12 +139,16 @@ def test_servo_period_writes_joint_ctrl_bit_for_bit_at_every_physics_step() -> N
         qvel[c.qpos_adr] = rng.normal(0.0, 0.5, len(c.qpos_adr)) if moving else 0.0
         leg_load = c.leg_load(target)
         dt = m.opt.timestep
-        servo = c.period(target, leg_load, qvel if moving else None, robot.substeps, dt)
+        servo = c.period(target, leg_load, qvel if moving else None, robot.substeps, dt, d)
+        expected = [
+            c.joint_ctrl(target + (k * dt) * qvel, d, leg_load, qvel if moving else None)
+            for k in range(robot.substeps)
+        ]
+        assert np.any(d.qfrc_bias[c.dof_adr[c.feed_forward & ~c.support]])
         for k in range(robot.substeps):
-            expected = c.joint_ctrl(target + (k * dt) * qvel, d, leg_load, qvel if moving else None)
             servo.write(k, d)
-            assert np.array_equal(d.ctrl[c.actuators], expected), (moving, k)
-            mujoco.mj_step(m, d)  # qfrc_bias changes from step to step
+            assert np.array_equal(d.ctrl[c.actuators], expected[k]), (moving, k)
+            mujoco.mj_step(m, d)  # qfrc_bias changes from step to step, the period's ctrl does not
 
 
 def _stack_onto_left_hand(world: World) -> None:
