@@ -83,24 +83,46 @@ class JointTargetController:
         self.kv = np.array(kv)
         self.feed_forward = np.array(ff, dtype=bool)
         self.support = np.array(support, dtype=bool)
+        self._leg_dofs = self.dof_adr[self.support]
+        self._kv_over_kp = self.kv / self.kp
+        self._bias = self.feed_forward & ~self.support  # arm and waist servos
+        self._bias_dofs = self.dof_adr[self._bias]
+        self._bias_kp = self.kp[self._bias]
+        self._support_kp = self.kp[self.support]
+        self._gravity = np.empty(model.nv)
+        self._jac = np.empty((6 * len(self.feet), model.nv))
         self.ctrl_low = model.actuator_ctrlrange[self.actuators, 0]
         self.ctrl_high = model.actuator_ctrlrange[self.actuators, 1]
 
     def leg_load(self, q_target: FloatArray) -> FloatArray:
-        """Static torque of each leg actuator holding ``q_target`` on both feet (0 elsewhere)."""
+        """Static torque of each leg actuator holding ``q_target`` on both feet (0 elsewhere).
+
+        The support wrenches are the minimum-norm solution of ``A f = g_base`` (``A`` =
+        ``J_c,base^T``, 6 x 12, full row rank: each foot's base block is a rigid transform):
+        ``f = A^T (A A^T)^-1 g_base``, by a Cholesky solve of the 6 x 6 ``A A^T`` (what
+        ``numpy.linalg.lstsq`` returns, to rounding, at a fraction of its cost per tick).
+        """
         model, d = self.model, self._scratch
         d.qpos[:] = q_target
         d.qvel[:] = 0.0
         mujoco.mj_kinematics(model, d)
         mujoco.mj_comPos(model, d)
-        gravity = np.empty(model.nv)
+        gravity, jac = self._gravity, self._jac
         mujoco.mj_rne(model, d, 0, gravity)  # qvel = 0, no acceleration: gravity only
-        jac = np.empty((6 * len(self.feet), model.nv))
         for i, foot in enumerate(self.feet):
             mujoco.mj_jacBody(model, d, jac[6 * i : 6 * i + 3], jac[6 * i + 3 : 6 * i + 6], foot)
-        wrench = np.linalg.lstsq(jac[:, self.base_dofs].T, gravity[self.base_dofs], rcond=None)[0]
-        load = gravity[self.dof_adr] - (jac[:, self.dof_adr].T @ wrench)
-        return np.where(self.support, load, 0.0)
+        base = jac[:, self.base_dofs]  # A^T
+        g_base = gravity[self.base_dofs]
+        normal = base.T @ base
+        if mujoco.mju_cholFactor(normal, 0.0) == len(g_base):
+            y = np.empty(len(g_base))
+            mujoco.mju_cholSolve(y, normal, g_base)
+            wrench = base @ y
+        else:  # a degenerate stance (never on two feet): least squares
+            wrench = np.linalg.lstsq(base.T, g_base, rcond=None)[0]
+        load = np.zeros(len(self.dof_adr))
+        load[self.support] = gravity[self._leg_dofs] - jac[:, self._leg_dofs].T @ wrench
+        return load
 
     def joint_ctrl(
         self,
@@ -142,19 +164,21 @@ class JointTargetController:
         ``joint_ctrl(q_target + k timestep qvel_target, data, leg_load, qvel_target)`` with
         ``data`` as it is now.
         """
-        qadr = self.qpos_adr
-        base = np.broadcast_to(q_target[qadr], (steps, len(qadr)))
+        q = q_target[self.qpos_adr]
         if qvel_target is not None:
-            v = qvel_target[qadr]
-            ramp = (np.arange(steps) * timestep)[:, None] * v[None, :]
-            base = (base + ramp) + self.kv / self.kp * v
+            v = qvel_target[self.qpos_adr]
+            base = q + (np.arange(steps) * timestep)[:, None] * v  # (steps, n)
+            base += self._kv_over_kp * v
+        else:
+            base = q[None, :]  # every step the same: one row
         # The arithmetic (operands, order, rounding) of joint_ctrl: legs get the model-based
         # load of the target, arms and waist qfrc_bias, the rest + 0.0 (exact).
-        load = np.where(self.support, 0.0, data.qfrc_bias[self.dof_adr])
-        load += leg_load
-        fixed = load / self.kp
-        fixed[~self.feed_forward] = 0.0
-        ctrl = np.clip(base + fixed, self.ctrl_low, self.ctrl_high)
+        fixed = np.zeros(len(q))
+        fixed[self._bias] = data.qfrc_bias[self._bias_dofs] / self._bias_kp
+        fixed[self.support] = leg_load[self.support] / self._support_kp
+        base += fixed
+        ctrl = np.maximum(base, self.ctrl_low, out=base)  # np.clip, without its wrapper
+        np.minimum(ctrl, self.ctrl_high, out=ctrl)
         return ServoPeriod(self.actuators, ctrl, moving=qvel_target is not None)
 
 
@@ -163,12 +187,12 @@ class ServoPeriod:
 
     def __init__(self, actuators: NDArray[np.int_], ctrl: FloatArray, *, moving: bool) -> None:
         self.actuators = actuators
-        self.ctrl = ctrl  # (steps, len(actuators))
-        self.moving = moving  # False: every row is the same
+        self.ctrl = ctrl  # (steps, len(actuators)); a fixed target: one row for all steps
+        self.moving = moving  # False: every step's ctrl is row 0
 
     def write(self, k: int, data: mujoco.MjData) -> None:
         """Servo ctrl of the period's ``k``-th physics step into ``data.ctrl``."""
-        data.ctrl[self.actuators] = self.ctrl[k]
+        data.ctrl[self.actuators] = self.ctrl[k if self.moving else 0]
 
 
 @dataclass

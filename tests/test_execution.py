@@ -151,6 +151,40 @@ def test_servo_period_writes_joint_ctrl_bit_for_bit_at_every_physics_step() -> N
             mujoco.mj_step(m, d)  # qfrc_bias changes from step to step, the period's ctrl does not
 
 
+def test_leg_load_is_the_least_squares_support_of_the_target_pose() -> None:
+    """The Cholesky solve of the support wrenches against ``numpy.linalg.lstsq`` of the base's
+    equilibrium ``J_c,base^T f = g_base``, on perturbed stances; and the result is static:
+    the floating base's gravity is carried by the feet (``J_c,base^T f = g_base`` holds)."""
+    import mujoco
+
+    from executive.execution import JointTargetController
+
+    world = build(load(SCENARIO))
+    c, m = JointTargetController(world), world.model
+    d = mujoco.MjData(m)
+    rng = np.random.default_rng(5)
+    for _ in range(20):
+        q = world.home_qpos()
+        q[c.qpos_adr] += rng.normal(0.0, 0.1, len(c.qpos_adr))
+        d.qpos[:] = q
+        mujoco.mj_forward(m, d)
+        gravity = np.empty(m.nv)
+        mujoco.mj_rne(m, d, 0, gravity)
+        jac = np.vstack([np.vstack(_body_jac(m, d, foot)) for foot in c.feet])
+        wrench = np.linalg.lstsq(jac[:, c.base_dofs].T, gravity[c.base_dofs], rcond=None)[0]
+        assert np.allclose(jac[:, c.base_dofs].T @ wrench, gravity[c.base_dofs], atol=1e-9)
+        expected = np.where(c.support, gravity[c.dof_adr] - jac[:, c.dof_adr].T @ wrench, 0.0)
+        assert np.allclose(c.leg_load(q), expected, rtol=1e-10, atol=1e-10)
+
+
+def _body_jac(m, d, body):  # type: ignore[no-untyped-def]
+    import mujoco
+
+    jacp, jacr = np.empty((3, m.nv)), np.empty((3, m.nv))
+    mujoco.mj_jacBody(m, d, jacp, jacr, body)
+    return jacp, jacr
+
+
 def _stack_onto_left_hand(world: World) -> None:
     """Move the (welded) book stack so that its box swallows the left hand site."""
     import mujoco
