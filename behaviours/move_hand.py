@@ -32,10 +32,12 @@ class MoveHand(RobotBehaviour):
         tolerance: float = 0.03,
         settle_s: float = 0.6,
         touching: tuple[str, str] | None = None,
+        approaching: tuple[str, str] | None = None,
     ) -> None:
         super().__init__(name)
         self.trajectory = trajectory
         self.touching = touching  # (side, object) the hand may still touch (just released)
+        self.approaching = approaching  # (side, object) the open hand moves onto to grasp
         self.tolerance = tolerance
         self.settle_s = settle_s
         self._t0 = 0.0
@@ -55,7 +57,9 @@ class MoveHand(RobotBehaviour):
         carried = next(iter(holding.items()), None) if holding else None
         # Lifting off and setting down: the carried object may still/already touch the table.
         placing = carried[1] if carried and self.phase in ("lift", "place") else None
-        self.robot.detector.set_phase(carried=carried, grasping=self.touching, placing=placing)
+        self.robot.detector.set_phase(
+            carried=carried, grasping=self.touching, placing=placing, approaching=self.approaching
+        )
 
     def update(self) -> Status:
         if self.failed_by_detector():

@@ -530,7 +530,13 @@ def build_subtree(plan: AlternativePlan, *, guard: bool = False) -> py_trees.com
             # After a release the open jaws may still brush the object they let go of.
             let_go = step.obj or (step.allow_contact[0] if step.allow_contact else "")
             touching = (step.side, let_go) if step.kind in ("retreat", "home") and let_go else None
-            mover = movers[step.kind](step.name, plan.trajectories[step.name], touching=touching or None)
+            # The move onto a grasp: the open jaws must straddle the object, not land on it.
+            after = steps[i + 1] if i + 1 < len(steps) else None
+            onto_grasp = after is not None and after.kind == "grasp" and after.side == step.side
+            approaching = (step.side, after.obj) if after is not None and onto_grasp else None
+            mover = movers[step.kind](
+                step.name, plan.trajectories[step.name], touching=touching or None, approaching=approaching
+            )
             children.append(
                 RiskGuard(
                     mover,

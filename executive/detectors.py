@@ -24,6 +24,10 @@ Failure modes
     (the distance from the site to the object's surface: 0 while the site is inside
     the object, as between closed jaws); any object touching the floor; or a failed
     :meth:`FailureDetector.check_placed`.
+    A hand that lands on the object it is approaching to grasp (``set_phase(approaching=...)``)
+    with at least ``collision_force`` is a drop too: its jaws missed the object (a grasp
+    misaligned beyond the jaws' clearance), the failure the grasp risk predicts; it is not
+    counted as a collision, whose risk model allows a hand to touch what it grasps.
 ``collision``
     Any contact that is not allowed (below) with normal force at least
     ``collision_force`` (``mujoco.mj_contactForce``): the robot touching the table,
@@ -108,7 +112,8 @@ _SELF = 1
 _COLLISION = 2
 _FALL = 3  # a non-sole robot geom on the floor
 _DROP = 4  # an object on the floor
-_SEVERITY = {_COLLISION: 1, _DROP: 2, _FALL: 3}  # several in one step: report the worst
+_MISGRASP = 5  # a hand on the object it approaches to grasp: the jaws missed it
+_SEVERITY = {_COLLISION: 1, _MISGRASP: 1, _DROP: 2, _FALL: 3}  # several in one step: report the worst
 _BOX, _SPHERE, _CYLINDER = (
     int(mujoco.mjtGeom.mjGEOM_BOX),
     int(mujoco.mjtGeom.mjGEOM_SPHERE),
@@ -309,6 +314,7 @@ class FailureDetector:
         self._carried: tuple[str, str] | None = None
         self._grasping: tuple[str, str] | None = None
         self._placing: str | None = None
+        self._approaching: tuple[str, str] | None = None
         self.set_phase()
 
     # --- phase ---------------------------------------------------------------------------
@@ -319,16 +325,19 @@ class FailureDetector:
         carried: tuple[str, str] | None = None,
         grasping: tuple[str, str] | None = None,
         placing: str | None = None,
+        approaching: tuple[str, str] | None = None,
     ) -> None:
         """Declare what the behaviour does now; each call replaces the previous phase.
 
         carried: (side, object) the hand holds now; grasping: (side, object) the hand may
-        touch now (closing on it); placing: the object allowed to touch the table now.
+        touch now (closing on it); placing: the object allowed to touch the table now;
+        approaching: (side, object) the open hand is moving onto to grasp: a forceful touch
+        now is a misaligned grasp (mode ``drop``), not a collision.
         A handover carries with one side and grasps with the other.
         """
         codes = self._base_codes.copy()
         put = self._put
-        for pair in (carried, grasping):
+        for pair in (carried, grasping, approaching):
             if pair is not None:
                 self._check_side(pair[0])
                 self._check_object(pair[1])
@@ -341,6 +350,10 @@ class FailureDetector:
             put(g, self._table, _COLLISION, codes)
             put(g, others, _COLLISION, codes)
             put(g, self._hand_geoms[side], _ALLOWED, codes)
+        if approaching is not None:
+            side, name = approaching
+            g = np.array([self._object_geom[name]], dtype=np.int64)
+            put(g, self._hand_geoms[side], _MISGRASP, codes)
         if grasping is not None:
             side, name = grasping
             g = np.array([self._object_geom[name]], dtype=np.int64)
@@ -352,17 +365,28 @@ class FailureDetector:
         self._code_rows = codes.tolist()
         self._quiet_pairs = b""  # the codes changed: classify the next contacts afresh
         self._carried, self._grasping, self._placing = carried, grasping, placing
+        self._approaching = approaching
         # Forbidden pairs for the clearance (floor excluded: its distance says nothing); +inf
         # on the pairs that may touch, so they never beat the best clearance.
-        forbidden = codes[np.ix_(self._clr_movers, self._clr_things)] == _COLLISION
+        forbidden = codes[np.ix_(self._clr_movers, self._clr_things)] == _COLLISION  # not _MISGRASP
         forbidden &= self._clr_movers[:, None] != self._clr_things[None, :]
         self._clr_offset = np.where(forbidden, self._clr_base_offset, np.inf)
         self._clr_best = math.nan  # recompute the squared thresholds at the next clearance
 
     @property
+    def carried(self) -> tuple[str, str] | None:
+        """(side, object) the phase last set says a hand carries, or None."""
+        return self._carried
+
+    @property
     def phase(self) -> dict[str, object]:
         """The phase last set (for logging)."""
-        return {"carried": self._carried, "grasping": self._grasping, "placing": self._placing}
+        return {
+            "carried": self._carried,
+            "grasping": self._grasping,
+            "placing": self._placing,
+            "approaching": self._approaching,
+        }
 
     # --- results -------------------------------------------------------------------------
 
@@ -558,6 +582,15 @@ class FailureDetector:
             return None
         severity, f, key = worst
         a, b = self._pair_labels(key)
+        if pair_code[key] == _MISGRASP:
+            return Failure(
+                "drop",
+                f"drop: {a} landed on {b} with {f:.1f} N at t={t:.3f} s while approaching to grasp it "
+                "(the jaws missed it: a misaligned grasp)",
+                t,
+                (a, b),
+                f,
+            )
         if severity == _SEVERITY[_FALL]:
             return Failure("fall", f"fall: {a} touched the {b} with {f:.1f} N at t={t:.3f} s", t, (a, b), f)
         if severity == _SEVERITY[_DROP]:

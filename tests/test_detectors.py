@@ -391,6 +391,23 @@ def test_fingers_on_the_book_are_allowed_while_grasping_it(world: World) -> None
     assert failure.bodies[0].startswith("left_") and failure.bodies[1] == "book"
 
 
+def test_jaws_landing_on_the_book_they_approach_are_a_misaligned_grasp(world: World) -> None:
+    """Closed jaws driven down onto the book while approaching to grasp it: a drop (the grasp
+    missed), not a collision; the same motion approaching with the other hand is a collision."""
+    approaching = FailureDetector(world)
+    approaching.set_phase(approaching=("left", "book"))
+    failure = _drive(world, approaching, _down_onto_book("left"))
+    print(failure)
+    assert failure is not None and failure.mode == "drop" and "misaligned grasp" in failure.detail
+    assert failure.bodies[0].startswith("left_") and failure.bodies[1] == "book"
+    assert failure.force >= 1.0
+    world.reset()
+    other = FailureDetector(world)
+    other.set_phase(approaching=("right", "book"))
+    failure = _drive(world, other, _down_onto_book("left"))
+    assert failure is not None and failure.mode == "collision" and failure.bodies[1] == "book"
+
+
 def test_set_phase_names_the_valid_choices(world: World) -> None:
     detector = FailureDetector(world)
     with pytest.raises(DetectorError, match="left, right"):
@@ -439,7 +456,12 @@ def test_a_carried_object_may_touch_the_table_only_while_being_placed(world: Wor
     placing.set_phase(carried=("left", "book"), placing="book")
     _hold(world, placing, 0.5)
     assert placing.failure is None
-    assert placing.phase == {"carried": ("left", "book"), "grasping": None, "placing": "book"}
+    assert placing.phase == {
+        "carried": ("left", "book"),
+        "grasping": None,
+        "placing": "book",
+        "approaching": None,
+    }
 
 
 def test_a_new_phase_reclassifies_contacts_that_did_not_change(world: World) -> None:
