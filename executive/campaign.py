@@ -772,6 +772,9 @@ def run_campaign(
         varied = not scenario.trials.scene_variation.is_zero()
         if varied:
             log("the scene varies from trial to trial (trials.scene_variation): each trial plans on its own")
+            low, high = scenario.trials.scene_variation.perception_scale
+            if (low, high) != (1.0, 1.0):
+                log(f"  and so does the perception: pose sigmas x {low:g} to x {high:g} (log-uniform)")
         else:
             log(f"planning {', '.join(names)} on the estimate")
             predictions = runner.predict(names)
