@@ -137,7 +137,7 @@ def test_a_killed_campaign_keeps_its_trials_and_resume_completes_it(reference: P
     out = tmp_path / "killed"
     yaml = tmp_path / "book_transfer_fixed.yaml"
     text = registry.scenario_path("book_transfer").read_text()
-    yaml.write_text(re.sub(r"\n  scene_variation: .*", "", text))
+    yaml.write_text(re.sub(r"\n  scene_variation:.*(\n    .*)*", "", text))  # the block, all its lines
     assert fixed_estimate().trials == load(yaml).trials
     cmd = [sys.executable, "-m", "executive.cli", "campaign", str(yaml), "--trials", str(TRIALS)]
     cmd += ["--alternatives", ",".join(ALTERNATIVES), "--out", str(out)]
