@@ -194,7 +194,8 @@ def reliability_diagram(
 
     floor = 1e-4  # probabilities below are drawn at the axis' left edge
     fig, ax = plt.subplots(figsize=(6.5, 5.5))
-    ax.plot([floor, 1], [floor, 1], color="0.6", linestyle="--", linewidth=1, label="perfect calibration")
+    diagonal = np.logspace(np.log10(floor), 0.0, 200)  # y = x, which a log x axis bends
+    ax.plot(diagonal, diagonal, color="0.6", linestyle="--", linewidth=1, label="perfect calibration")
     for label, p, y in curves:
         p_arr, y_arr = np.asarray(p, dtype=float), np.asarray(y, dtype=float)
         if len(p_arr) == 0:
