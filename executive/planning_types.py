@@ -154,7 +154,7 @@ class PlannerConfig:
     relax_floor: float = 1e-3
     stall_iterations: int = 60
     stall_improvement: float = 1e-4
-    ik_dt: float = 0.02
+    ik_dt: float = 0.025
     feet_tolerance: float = 1e-5
     damping: float = 1e-3
     hand_position_cost: float = 50.0
