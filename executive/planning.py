@@ -1,8 +1,9 @@
 """Whole-body motion planning with mink: hands to targets, feet fixed, CoM over the feet.
 
 :meth:`Planner.move` drives one or both hands to target poses from a start
-configuration by differential inverse kinematics (``mink.solve_ik`` with the
-``daqp`` QP solver), then re-times the geometric path (see
+configuration by differential inverse kinematics (mink's tasks and limits; the QP
+of ``mink.solve_ik``, assembled on the unfrozen dofs and solved with DAQP by
+:class:`~executive.planning_limits.JointBounds`), then re-times the geometric path (see
 :mod:`executive.planning_timing`). Everything runs on the *estimate* world's
 model (DESIGN.md, "Data flow"); the returned qpos index that model.
 

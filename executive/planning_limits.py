@@ -1,7 +1,8 @@
 """Inequality limits of the whole-body planner: support polygon and collision avoidance.
 
-Both are ``mink.Limit`` subclasses, so ``mink.solve_ik`` stacks them with its own
-limits into ``G dq <= h``.
+Both are ``mink.Limit`` subclasses, so ``mink.solve_ik`` (or the planner's
+:class:`JointBounds`, which solves the same QP) stacks them with its own limits into
+``G dq <= h``.
 
 * :class:`SupportPolygon` is the convex hull of the feet soles' footprint in the
   ground plane, with the signed margin of a point to its (shrunk) edges.
