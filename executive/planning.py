@@ -174,6 +174,11 @@ class Planner:
         self.tilt = TiltLimit(model, ids.torso_body, float(np.radians(cfg.max_torso_tilt_deg)))
         self.foot_geoms = [g for s in sorted(ids.foot_geoms) for g in ids.foot_geoms[s]]
         self._pairs: dict[tuple[tuple[str, str] | None, tuple[str, ...]], list[tuple[int, int]]] = {}
+        # The collision limit of each (carried, allow_contact), with its pairs' required clearance:
+        # both depend on the model and the configuration only, so they are built once.
+        self._limits: dict[
+            tuple[tuple[str, str] | None, tuple[str, ...]], tuple[GeomPairCollisionLimit, FloatArray]
+        ] = {}
         self._collision_groups()
 
     # --- setup helpers ----------------------------------------------------------------------
@@ -312,18 +317,24 @@ class Planner:
                 site_pose(conf.data, ids.hand_sites[side]).inverse()
                 @ body_pose(conf.data, ids.object_bodies[obj]),
             )
-        pairs = self.collision_pairs(carried, allow_contact)
-        required = self.required_clearance(pairs)
-        collisions = GeomPairCollisionLimit(
-            model,
-            pairs,
-            # As for the balance: a little extra in the QP keeps the interpolated knots clear.
-            required + cfg.clearance_tolerance,
-            cfg.detection_distance,
-            cfg.collision_gain,
-            attach,
-            cfg.collision_recovery,
-        )
+        key = (carried, tuple(allow_contact))
+        if key not in self._limits:
+            pairs = self.collision_pairs(carried, allow_contact)
+            required = self.required_clearance(pairs)
+            self._limits[key] = (
+                GeomPairCollisionLimit(
+                    model,
+                    pairs,
+                    # As for the balance: a little extra in the QP keeps the interpolated knots clear.
+                    required + cfg.clearance_tolerance,
+                    cfg.detection_distance,
+                    cfg.collision_gain,
+                    attach,
+                    cfg.collision_recovery,
+                ),
+                required,
+            )
+        collisions, required = self._limits[key]
         # Keep a small extra margin in the QP so that interpolated knots stay inside the checked one.
         balance = SupportPolygonLimit(model, ids.base_body, polygon, cfg.support_margin + 0.002)
         limits: list[mink.Limit] = [self.tilt, balance, collisions]

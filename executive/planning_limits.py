@@ -388,7 +388,7 @@ class GeomPairCollisionLimit(mink.Limit):
         self._fromto = np.empty((len(self.pairs), 6))  # witness segment per pair, last asked
         self._first = np.ascontiguousarray(self.pairs[:, 0])
         self._second = np.ascontiguousarray(self.pairs[:, 1])
-        self._pair_list = [(int(a), int(b)) for a, b in self.pairs]
+        self._pair_list = [(a, b) for a, b in self.pairs.tolist()]
         self._reach = model.geom_rbound[self.pairs[:, 0]] + model.geom_rbound[self.pairs[:, 1]]
         self._cores = _Cores(model, self.pairs)
         # The last full query (every candidate within the detection distance): the qpos it was
@@ -417,6 +417,8 @@ class GeomPairCollisionLimit(mink.Limit):
         if reach >= dmax:
             near = asked[out[asked] < dmax]  # the QP rows skip pairs at the detection distance
             self._cache_qpos, self._cache = data.qpos.copy(), (near, out[near])
+        else:  # some witness segments were overwritten at another configuration
+            self._cache_qpos = None
         return out
 
     def _candidates(self, data: mujoco.MjData, cutoff: float | None = None) -> NDArray[np.int_]:
