@@ -28,7 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.planning_limits import GeomPairCollisionLimit, SupportPolygon
-from executive.planning_types import PlannerConfig, PlanningError, Relative, attach_object
+from executive.planning_types import PlannerConfig, PlanningError, Relative
 
 __all__ = [
     "Frames",
@@ -297,7 +297,12 @@ class _Knots(NamedTuple):
 def _knot_kinematics(
     model: mujoco.MjModel, data: mujoco.MjData, qpos: FloatArray, relative: Relative | None, frames: Frames
 ) -> _Knots:
-    """Forward kinematics at every knot, a carried object re-attached to its hand first."""
+    """Forward kinematics at every knot, a carried object re-attached to its hand.
+
+    The object is attached after the loop, for all knots at once (``attach_object``'s formula),
+    and its geoms posed from its free joint as ``mj_kinematics`` poses them: the robot's
+    kinematics do not depend on it.
+    """
     count = len(qpos)
     com = np.empty((count, 3))
     attached = np.array(qpos, dtype=float)
@@ -305,19 +310,79 @@ def _knot_kinematics(
     hands = np.empty((count, len(sites), 3))
     xpos = np.empty((count, model.ngeom, 3))
     xmat = np.empty((count, model.ngeom, 9))
+    site = relative[0] if relative is not None else 0
+    site_pos, site_mat, site_quat = np.empty((count, 3)), np.empty((count, 9)), np.empty((count, 4))
     for k in range(count):
         data.qpos[:] = attached[k]
         mujoco.mj_kinematics(model, data)
-        if relative is not None:
-            attach_object(data, relative)
-            attached[k] = data.qpos
-            mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
         com[k] = data.subtree_com[frames.base_body]
         hands[k] = data.site_xpos[sites]
         xpos[k] = data.geom_xpos
         xmat[k] = data.geom_xmat
+        if relative is not None:
+            site_pos[k] = data.site_xpos[site]
+            site_mat[k] = data.site_xmat[site]
+            mujoco.mju_mat2Quat(site_quat[k], data.site_xmat[site])
+    if relative is not None:
+        _attach_all(model, relative, site_pos, site_mat, site_quat, attached, xpos, xmat)
     return _Knots(attached, com, hands, xpos, xmat)
+
+
+def _quat_mul(a: FloatArray, b: FloatArray) -> FloatArray:
+    """Hamilton products of quaternions (w x y z), row by row (``mju_mulQuat``)."""
+    aw, ax, ay, az = a[..., 0], a[..., 1], a[..., 2], a[..., 3]
+    bw, bx, by, bz = b[..., 0], b[..., 1], b[..., 2], b[..., 3]
+    return np.stack(
+        [
+            aw * bw - ax * bx - ay * by - az * bz,
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+        ],
+        axis=-1,
+    )
+
+
+def _quat_mat(q: FloatArray) -> FloatArray:
+    """Rotation matrices (..., 3, 3) of unit quaternions (w x y z) (``mju_quat2Mat``)."""
+    w, x, y, z = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+        ],
+        axis=-2,
+    )
+
+
+def _attach_all(
+    model: mujoco.MjModel,
+    relative: Relative,
+    site_pos: FloatArray,
+    site_mat: FloatArray,
+    site_quat: FloatArray,
+    qpos: FloatArray,
+    xpos: FloatArray,
+    xmat: FloatArray,
+) -> None:
+    """:func:`attach_object` at every knot (hand pose x relative pose into the object's free
+    joint), and the object's geoms posed from it: in place in ``qpos``, ``xpos``, ``xmat``."""
+    _site, body, qadr, rel = relative
+    rel_quat, rel_pos = rel.wxyz_xyz[:4], rel.wxyz_xyz[4:]
+    position = site_pos + np.einsum("kij,j->ki", site_mat.reshape(-1, 3, 3), rel_pos)
+    quat = _quat_mul(site_quat, rel_quat)
+    quat /= np.linalg.norm(quat, axis=1, keepdims=True)
+    qpos[:, qadr : qadr + 3] = position
+    qpos[:, qadr + 3 : qadr + 7] = quat
+    # A free joint's body sits at its qpos (mj_kinematics); its geoms at their offsets in it.
+    rotation = _quat_mat(quat)
+    for geom in np.flatnonzero(model.geom_bodyid == body).tolist():
+        xpos[:, geom] = position + rotation @ model.geom_pos[geom]
+        local = np.empty(9)
+        mujoco.mju_quat2Mat(local, model.geom_quat[geom])
+        xmat[:, geom] = (rotation @ local.reshape(3, 3)).reshape(-1, 9)
 
 
 def zmp_path(times: FloatArray, com: FloatArray, window: float = 0.1, gravity: float = 9.81) -> FloatArray:
