@@ -126,13 +126,25 @@ def path_parameter(
     step costs at least ``max_p |dx_p| / point_speed`` too (a Cartesian speed limit).
     """
     s = np.zeros(len(path))
-    dq = np.empty(model.nv)
-    for i in range(1, len(path)):
-        mujoco.mj_differentiatePos(model, dq, 1.0, path[i - 1], path[i])
-        cost = float(np.max(np.abs(dq[dof_index]) / limits))
-        if points is not None:
-            cost = max(cost, float(np.max(np.linalg.norm(points[i] - points[i - 1], axis=-1))) / point_speed)
-        s[i] = s[i - 1] + cost
+    if len(path) < 2:
+        return s
+    joints = model.dof_jntid[dof_index]
+    linear = (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE))
+    if np.all(np.isin(model.jnt_type[joints], linear)):
+        # A hinge or slide dof's tangent step is its qpos difference (mj_differentiatePos).
+        qadr = model.jnt_qposadr[joints] + (dof_index - model.jnt_dofadr[joints])
+        steps = np.diff(np.asarray(path)[:, qadr], axis=0)
+    else:
+        steps = np.empty((len(path) - 1, len(dof_index)))
+        dq = np.empty(model.nv)
+        for i in range(1, len(path)):
+            mujoco.mj_differentiatePos(model, dq, 1.0, path[i - 1], path[i])
+            steps[i - 1] = dq[dof_index]
+    cost = np.max(np.abs(steps) / limits, axis=1)
+    if points is not None:
+        moved = np.max(np.linalg.norm(np.diff(points, axis=0), axis=-1), axis=1) / point_speed
+        cost = np.maximum(cost, moved)
+    s[1:] = np.cumsum(cost)
     return s
 
 
