@@ -431,27 +431,29 @@ class GeomPairCollisionLimit(mink.Limit):
         return np.flatnonzero(gap <= limit)
 
     def knot_candidates(
-        self, xpos: FloatArray, xmat: FloatArray, cutoff: float
+        self, xpos: FloatArray, xmat: FloatArray, cutoff: float | FloatArray
     ) -> tuple[NDArray[np.int_], NDArray[np.int_]]:
         """The broadphase of :meth:`_candidates` at many configurations at once.
 
-        ``xpos`` (K, ngeom, 3) and ``xmat`` (K, ngeom, 9): the geoms' poses at K configurations.
-        Returns (knot, pair) index arrays of the pairs that may be within ``cutoff`` there
-        (every other pair is farther than ``cutoff`` for sure).
+        ``xpos`` (K, ngeom, 3) and ``xmat`` (K, ngeom, 9): the geoms' poses at K configurations;
+        ``cutoff``: one distance for all pairs or one per pair. Returns (knot, pair) index arrays
+        of the pairs that may be within their cutoff there (every other pair is farther than
+        its cutoff for sure), in knot order.
         """
         if len(self.pairs) == 0 or len(xpos) == 0:
             empty = np.zeros(0, dtype=int)
             return empty, empty
+        limit = np.broadcast_to(np.asarray(cutoff, dtype=float), (len(self.pairs),))
         # Pairs whose centres' boxes over all K configurations stay apart are never near.
         lo, hi = xpos.min(axis=0), xpos.max(axis=0)
         first, second = self._first, self._second
         apart = np.maximum(np.maximum(lo[first] - hi[second], lo[second] - hi[first]), 0.0)
-        some = np.flatnonzero(np.sqrt(np.einsum("ij,ij->i", apart, apart)) - self._reach <= cutoff)
+        some = np.flatnonzero(np.sqrt(np.einsum("ij,ij->i", apart, apart)) - self._reach <= limit)
         delta = xpos[:, first[some]] - xpos[:, second[some]]
         gap = np.sqrt(np.einsum("kij,kij->ki", delta, delta)) - self._reach[some]
-        knots, pairs = np.nonzero(gap <= cutoff)
+        knots, pairs = np.nonzero(gap <= limit[some])
         pairs = some[pairs]
-        keep = self._cores.bounds(xpos, xmat, knots, pairs) <= cutoff
+        keep = self._cores.bounds(xpos, xmat, knots, pairs) <= limit[pairs]
         return knots[keep], pairs[keep]
 
     def _queries(self, data: mujoco.MjData) -> tuple[NDArray[np.int_], FloatArray]:

@@ -249,10 +249,10 @@ def build_trajectory(
     qpos = knots.qpos
     hands = {s: knots.hands[:, i].copy() for i, s in enumerate(frames.hand_sites)}
     floor = np.asarray(floor, dtype=float) - cfg.clearance_tolerance
-    # Pairs that the broadphase (on the knots' geom poses) puts farther apart than every floor
-    # cannot break one: not asked.
-    cutoff = float(np.max(floor)) if len(floor) else 0.0
-    at, pairs = collisions.knot_candidates(knots.geom_xpos, knots.geom_xmat, cutoff)
+    # Pairs that the broadphase (on the knots' geom poses) puts farther apart than their floor
+    # cannot break it: not asked. (Its bounds hold for distances from 0 up: a floor below 0, a
+    # pair that starts penetrating, is asked whenever the pair may touch.)
+    at, pairs = collisions.knot_candidates(knots.geom_xpos, knots.geom_xmat, np.maximum(floor, 0.0))
     fromto = np.empty(6)
     distance = np.empty(len(at))
     dmax = collisions.detection_distance
