@@ -199,6 +199,15 @@ class JointBounds:
         keep = where[velocity.indices] >= 0
         self._velocity_at = where[velocity.indices][keep]
         self._velocity = np.asarray(velocity.limit, dtype=float)[keep]
+        self._posture_columns: dict[int, FloatArray] = {}
+
+    def _identity_columns(self, task: mink.PostureTask, configuration: mink.Configuration) -> FloatArray:
+        """The diagonal of a posture task's Jacobian (1, or 0 where mink leaves a dof out)."""
+        columns = self._posture_columns.get(id(task))
+        if columns is None:
+            columns = np.diag(task.compute_jacobian(configuration)).copy()
+            self._posture_columns[id(task)] = columns
+        return columns
 
     def bounds(self, q: FloatArray, dt: float, velocity: bool = True) -> tuple[FloatArray, FloatArray]:
         """(lower, upper) bounds of the free dofs' step at ``q``: range (mink's gain, bounds
@@ -255,23 +264,35 @@ class JointBounds:
         Raises mink.NoSolutionFound when the QP is infeasible.
         """
         free, n = self.free, len(self.free)
-        if tasks:
-            weighted: list[FloatArray] = []
-            errors: list[FloatArray] = []
-            mu = 0.0
-            for task in tasks:
-                residual = task.compute_qp_residual(configuration)
-                assert residual is not None  # mink's tasks here all have the J^T J form
-                jac, err, task_mu = residual
-                weighted.append(jac[:, free])
-                errors.append(err)
-                mu += task_mu
+        weighted: list[FloatArray] = []
+        errors: list[FloatArray] = []
+        mu = 0.0
+        diagonal, linear = np.zeros(n), np.zeros(n)
+        for task in tasks:
+            if isinstance(task, mink.PostureTask):
+                # J = I (zero columns on the floating base): its J^T W^2 J is diagonal, added
+                # as such instead of stacking an nv x nv block (mink's _weighted_residual).
+                error = task.compute_error(configuration)
+                cost = np.asarray(task.cost, dtype=float)
+                weighted_error = cost * (-task.gain * error)
+                mu += task.lm_damping * float(weighted_error @ weighted_error)
+                square = (cost * cost * self._identity_columns(task, configuration))[free]
+                diagonal += square
+                linear += task.gain * square * error[free]
+                continue
+            residual = task.compute_qp_residual(configuration)
+            assert residual is not None  # mink's tasks here all have the J^T J form
+            jac, err, task_mu = residual
+            weighted.append(jac[:, free])
+            errors.append(err)
+            mu += task_mu
+        if weighted:
             w = np.vstack(weighted)
             hessian = w.T @ w
-            linear = -(np.concatenate(errors) @ w)
+            linear -= np.concatenate(errors) @ w
         else:
-            hessian, linear, mu = np.zeros((n, n)), np.zeros(n), 0.0
-        hessian.flat[:: n + 1] += damping + mu
+            hessian = np.zeros((n, n))
+        hessian.flat[:: n + 1] += damping + mu + diagonal
         rows: list[FloatArray] = []
         upper: list[FloatArray] = []
         lower, high = self.bounds(configuration.q, dt, velocity)
