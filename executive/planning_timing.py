@@ -258,9 +258,9 @@ def build_trajectory(
     dmax = collisions.detection_distance
     last = -1
     for j, (k, g1, g2) in enumerate(zip(at.tolist(), *collisions.pairs[pairs].T.tolist(), strict=True)):
-        if k != last:
-            data.qpos[:] = qpos[k]
-            mujoco.mj_kinematics(model, data)
+        if k != last:  # the knot's geom poses, as its kinematics left them (all mj_geomDistance reads)
+            data.geom_xpos[:] = knots.geom_xpos[k]
+            data.geom_xmat[:] = knots.geom_xmat[k]
             last = k
         distance[j] = mujoco.mj_geomDistance(model, data, g1, g2, dmax, fromto)
     gaps = distance - floor[pairs]
