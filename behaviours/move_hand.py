@@ -62,9 +62,10 @@ class MoveHand(RobotBehaviour):
         )
 
     def update(self) -> Status:
-        if self.failed_by_detector():
-            return Status.FAILURE
         robot = self.robot  # one blackboard read per tick
+        if robot.failure is not None:
+            self.feedback_message = robot.failure.detail  # as failed_by_detector()
+            return Status.FAILURE
         t = robot.time - self._t0
         dt = robot.control_dt
         q = self.trajectory.sample(t)

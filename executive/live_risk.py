@@ -298,8 +298,13 @@ class LiveRiskMonitor:
             model, data = self.collision.model, self._kinematics
             data.qpos[:] = now
             mujoco.mj_kinematics(model, data)
-            move = np.linalg.norm(data.geom_xpos[ref.geoms] - ref.pos, axis=1)
-            move += np.linalg.norm(data.geom_xmat[ref.geoms] - ref.rot, axis=1) * ref.radius
+            # np.linalg.norm(axis=1), bit for bit (its sqrt(add.reduce(x * x))), without its wrapper
+            shift = data.geom_xpos[ref.geoms]
+            shift -= ref.pos
+            turn = data.geom_xmat[ref.geoms]
+            turn -= ref.rot
+            move = np.sqrt(np.add.reduce(shift * shift, axis=1))
+            move += np.sqrt(np.add.reduce(turn * turn, axis=1)) * ref.radius
             bound = ref.distance - float(move[: ref.n_robot].max())
             if ref.n_robot < len(move):
                 bound -= float(move[ref.n_robot :].max())
