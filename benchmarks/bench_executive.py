@@ -14,8 +14,9 @@ them. That replay is the "raw mj_step time of the same number of steps".
 Per run it prints:
 
 * execution phase (from the tick after the selector logged ``execute`` to the end: the
-  robot moving under the tree, detectors after every physics step, guards if on): wall
-  time, raw time, and their ratio -- the ticking overhead the issue's target is about;
+  robot moving under the tree, the contact detectors after every physics step and the
+  full detector check after each control period, guards if on): wall time, raw time, and
+  their ratio -- the ticking overhead the issue's target is about;
 * the whole run (background planning included; while the worker plans the robot holds and
   the bundled physics is paced to the wall clock, so that ratio measures planning, not
   ticking);
