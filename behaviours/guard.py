@@ -66,6 +66,8 @@ class RiskGuard(py_trees.decorators.Decorator):
         self.bb.register_key(LIVE_RISK_KEY, access=py_trees.common.Access.READ)
         self._allow: frozenset[tuple[str, str]] | None = None
         self._ticks = 0
+        self._watch: Any = None  # the monitor of the running motion (set in initialise)
+        self._robot: Any = None
         self.last_verdict: Any = None  # executive.live_risk.GuardVerdict of the latest check
         self.tripped: Any = None  # the verdict that stopped the motion, if any
 
@@ -91,20 +93,23 @@ class RiskGuard(py_trees.decorators.Decorator):
     def initialise(self) -> None:
         self._ticks = 0
         self.tripped = None
-        monitor = self._monitor()
+        # The monitor and robot the motion starts with serve its every tick (both are installed
+        # before the tree ticks; blackboard reads cost a few us each).
+        monitor = self._watch = self._monitor()
+        self._robot = self.bb.robot if monitor is not None else None
         if monitor is not None:
             self._allow = self.allow(monitor)
 
     def update(self) -> Status:
         status = self.decorated.status
         self.feedback_message = self.decorated.feedback_message
-        monitor = self._monitor()
+        monitor = self._watch
         if monitor is None or status != Status.RUNNING:
             return status
         self._ticks += 1
         if (self._ticks - 1) % self.every:
             return status
-        robot = self.bb.robot
+        robot = self._robot
         traj = self.motion.trajectory
         t = robot.time - self.motion.started_at
         verdict = monitor.check(

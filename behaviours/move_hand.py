@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 import py_trees
 
@@ -41,6 +43,7 @@ class MoveHand(RobotBehaviour):
         self.tolerance = tolerance
         self.settle_s = settle_s
         self._t0 = 0.0
+        self._robot: Any = None  # set in initialise
 
     @property
     def started_at(self) -> float:
@@ -48,7 +51,8 @@ class MoveHand(RobotBehaviour):
         return self._t0
 
     def initialise(self) -> None:
-        self._t0 = self.robot.time
+        self._robot = self.robot  # the robot of this run of the motion: one blackboard read
+        self._t0 = self._robot.time
         self.feedback_message = f"following {self.trajectory.name} ({self.trajectory.duration:.2f} s)"
         self._set_detector_phase()
 
@@ -62,7 +66,7 @@ class MoveHand(RobotBehaviour):
         )
 
     def update(self) -> Status:
-        robot = self.robot  # one blackboard read per tick
+        robot = self._robot
         if robot.failure is not None:
             self.feedback_message = robot.failure.detail  # as failed_by_detector()
             return Status.FAILURE
