@@ -89,6 +89,11 @@ class JointTargetController:
         self._bias_dofs = self.dof_adr[self._bias]
         self._bias_kp = self.kp[self._bias]
         self._support_kp = self.kp[self.support]
+        self._bias_idx = np.flatnonzero(self._bias)
+        self._support_idx = np.flatnonzero(self.support)
+        self._fixed = np.zeros(len(self.actuators))
+        self._ramp_key: tuple[int, float] | None = None
+        self._ramp = np.zeros((0, 1))
         self._gravity = np.empty(model.nv)
         self._jac = np.empty((6 * len(self.feet), model.nv))
         self.ctrl_low = model.actuator_ctrlrange[self.actuators, 0]
@@ -167,15 +172,18 @@ class JointTargetController:
         q = q_target[self.qpos_adr]
         if qvel_target is not None:
             v = qvel_target[self.qpos_adr]
-            base = q + (np.arange(steps) * timestep)[:, None] * v  # (steps, n)
+            if self._ramp_key != (steps, timestep):
+                self._ramp_key = (steps, timestep)
+                self._ramp = (np.arange(steps) * timestep)[:, None]
+            base = q + self._ramp * v  # (steps, n)
             base += self._kv_over_kp * v
         else:
             base = q[None, :]  # every step the same: one row
         # The arithmetic (operands, order, rounding) of joint_ctrl: legs get the model-based
         # load of the target, arms and waist qfrc_bias, the rest + 0.0 (exact).
-        fixed = np.zeros(len(q))
-        fixed[self._bias] = data.qfrc_bias[self._bias_dofs] / self._bias_kp
-        fixed[self.support] = leg_load[self.support] / self._support_kp
+        fixed = self._fixed  # zero but for the entries written here
+        fixed[self._bias_idx] = data.qfrc_bias[self._bias_dofs] / self._bias_kp
+        fixed[self._support_idx] = leg_load[self._support_idx] / self._support_kp
         base += fixed
         ctrl = np.maximum(base, self.ctrl_low, out=base)  # np.clip, without its wrapper
         np.minimum(ctrl, self.ctrl_high, out=ctrl)
@@ -244,7 +252,8 @@ class SimulatedRobot:
         is fed forward. None: a fixed target.
         """
         q = np.asarray(q_target, dtype=float)
-        if not np.array_equal(q, self.q_target):
+        old = self.q_target
+        if q.shape != old.shape or not (q == old).all():  # np.array_equal, without its wrapper
             self._leg_load = self.controller.leg_load(q)
         self.q_target = q
         self.qvel_target = np.zeros(self.model.nq) if qvel_target is None else np.asarray(qvel_target, float)
@@ -277,7 +286,7 @@ class SimulatedRobot:
         """
         data, model = self.data, self.model
         start = time.perf_counter()
-        moving = bool(np.any(self.qvel_target))
+        moving = bool(self.qvel_target.any())
         servo = self.controller.period(
             self.q_target,
             self._leg_load,
