@@ -93,7 +93,7 @@ class JointTargetController:
         self._support_idx = np.flatnonzero(self.support)
         self._fixed = np.zeros(len(self.actuators))
         self._ramp_key: tuple[int, float] | None = None
-        self._ramp = np.zeros((0, 1))
+        self._ramp: FloatArray = np.zeros((0, 1))
         self._gravity = np.empty(model.nv)
         self._jac = np.empty((6 * len(self.feet), model.nv))
         self.ctrl_low = model.actuator_ctrlrange[self.actuators, 0]
