@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -93,7 +94,7 @@ class JointTargetController:
         self._support_idx = np.flatnonzero(self.support)
         self._fixed = np.zeros(len(self.actuators))
         self._ramp_key: tuple[int, float] | None = None
-        self._ramp: FloatArray = np.zeros((0, 1))
+        self._ramp: NDArray[np.floating[Any]] = np.zeros((0, 1))
         self._gravity = np.empty(model.nv)
         self._jac = np.empty((6 * len(self.feet), model.nv))
         self.ctrl_low = model.actuator_ctrlrange[self.actuators, 0]
