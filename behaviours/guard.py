@@ -119,7 +119,7 @@ class RiskGuard(py_trees.decorators.Decorator):
             t,
             carried=traj.carried[1] if traj.carried else None,
             allow=self._allow or frozenset(),
-            com_margin=monitor.com_margin(robot.world, robot.data),
+            com_margin=monitor.com_margin(robot.world, robot.data, at_least=monitor.config.min_com_margin),
         )
         self.last_verdict = verdict
         if verdict.ok:

@@ -23,7 +23,14 @@ class MoveHand(RobotBehaviour):
     more seconds, failing if they are still off); fails at once when a
     physics detector flags a failure. ``update()`` never blocks: it only
     samples the trajectory and writes targets.
+
+    The targets of the coming ticks are sampled ahead, ``chunk`` control periods at a time
+    (:meth:`Trajectory.sample_many`, one vectorised call instead of two samples per tick); a
+    tick whose trajectory time is not the next sampled one (a host's robot whose clock does
+    not advance by exactly one period per tick) samples afresh from its own time.
     """
+
+    chunk: int = 50  # control periods sampled ahead (1 s at 50 Hz)
 
     phase: str = "free"  # what the detectors are told: free / lift / carry / place
 
@@ -44,6 +51,9 @@ class MoveHand(RobotBehaviour):
         self.settle_s = settle_s
         self._t0 = 0.0
         self._robot: Any = None  # set in initialise
+        self._ahead_t = np.zeros(0)  # trajectory times of the targets sampled ahead
+        self._ahead_q = np.zeros((0, 0))  # their qpos rows (one more than times: the next target)
+        self._ahead_i = 0  # the row of the next tick
 
     @property
     def started_at(self) -> float:
@@ -53,6 +63,7 @@ class MoveHand(RobotBehaviour):
     def initialise(self) -> None:
         self._robot = self.robot  # the robot of this run of the motion: one blackboard read
         self._t0 = self._robot.time
+        self._ahead_t, self._ahead_i = np.zeros(0), 0
         self.feedback_message = f"following {self.trajectory.name} ({self.trajectory.duration:.2f} s)"
         self._set_detector_phase()
 
@@ -71,9 +82,8 @@ class MoveHand(RobotBehaviour):
             self.feedback_message = robot.failure.detail  # as failed_by_detector()
             return Status.FAILURE
         t = robot.time - self._t0
-        dt = robot.control_dt
-        q = self.trajectory.sample(t)
-        robot.set_joint_targets(q, (self.trajectory.sample(t + dt) - q) / dt)
+        q, qvel = self._targets(t, robot.control_dt)
+        robot.set_joint_targets(q, qvel)
         if t < self.trajectory.duration:
             self.feedback_message = f"{self.trajectory.name}: {t:.2f}/{self.trajectory.duration:.2f} s"
             return Status.RUNNING
@@ -88,6 +98,17 @@ class MoveHand(RobotBehaviour):
             f"(tolerance {self.tolerance * 1000:.0f} mm)"
         )
         return Status.FAILURE
+
+    def _targets(self, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """The target at trajectory time ``t`` and its rate over the period, (q(t + dt) - q(t)) / dt."""
+        i = self._ahead_i
+        if i >= len(self._ahead_t) or abs(self._ahead_t[i] - t) > 1e-9:  # 1 ns: clock rounding only
+            self._ahead_t = t + dt * np.arange(self.chunk)
+            self._ahead_q = self.trajectory.sample_many(t + dt * np.arange(self.chunk + 1))
+            i = 0
+        self._ahead_i = i + 1
+        q = self._ahead_q[i]
+        return q, (self._ahead_q[i + 1] - q) / dt
 
     def hand_error(self) -> float:
         """Largest distance between a hand site and its planned final position."""

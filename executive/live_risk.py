@@ -51,7 +51,7 @@ from executive.risk.collision import CollisionModel
 from executive.scenario_types import GuardConfig
 from executive.world import World
 
-__all__ = ["GuardVerdict", "LiveRiskMonitor", "contact_support_margin", "interior_margin"]
+__all__ = ["GuardVerdict", "LiveRiskMonitor", "contact_support_margin", "foot_contact_rows", "interior_margin"]
 
 FloatArray = NDArray[np.float64]
 _TRACK_LIMIT = 512  # trajectories memoised; beyond, the memo starts afresh
@@ -83,6 +83,10 @@ class _Track:
         self.qpos = qpos
         self.dist = np.full(len(qpos), np.nan)
         self.names: list[tuple[str, str]] = [("", "")] * len(qpos)
+        # The last look-ahead window (lo, hi) and its least knot: a window's knots, once
+        # computed, never change in this track, so the next ticks inside the same knot
+        # interval reuse it.
+        self.window = (-1, -1, -1)
 
 
 _PAIRS: dict[int, FloatArray] = {}  # n -> the difference matrix of all ordered pairs i != j
@@ -122,8 +126,23 @@ def interior_margin(points: FloatArray, x: FloatArray) -> float | None:
     return margin if margin > _CLEARLY_INSIDE else None
 
 
+def foot_contact_rows(world: World, data: mujoco.MjData, feet: frozenset[int]) -> list[int]:
+    """Rows of ``data.contact`` between a foot geom and the floor (or, without a floor, any
+    non-robot geom): the support contacts of ``support_polygon(..., from_contacts=True)``."""
+    floor = world.ids.floor_geom
+    robot = world.ids.robot_geoms
+    rows = []
+    if data.ncon:
+        for i, (g1, g2) in enumerate(data.contact.geom.tolist()):
+            other = g2 if g1 in feet else g1 if g2 in feet else None
+            if other is None or (other != floor if floor >= 0 else other in robot):
+                continue
+            rows.append(i)
+    return rows
+
+
 def contact_support_margin(
-    world: World, data: mujoco.MjData, feet: frozenset[int] | None = None
+    world: World, data: mujoco.MjData, feet: frozenset[int] | None = None, rows: list[int] | None = None
 ) -> float | None:
     """CoM margin in the polygon of the feet's physics contacts with the floor (None: no polygon).
 
@@ -135,17 +154,10 @@ def contact_support_margin(
     :func:`interior_margin` without building the hull; anything else (outside, on the edge, no
     polygon) by :func:`executive.polygon.convex_hull` and ``signed_margin`` themselves.
     """
-    if feet is None:
-        feet = frozenset(g for geoms in world.ids.foot_geoms.values() for g in geoms)
-    floor = world.ids.floor_geom
-    robot = world.ids.robot_geoms
-    rows = []
-    if data.ncon:
-        for i, (g1, g2) in enumerate(data.contact.geom.tolist()):
-            other = g2 if g1 in feet else g1 if g2 in feet else None
-            if other is None or (other != floor if floor >= 0 else other in robot):
-                continue
-            rows.append(i)
+    if rows is None:
+        if feet is None:
+            feet = frozenset(g for geoms in world.ids.foot_geoms.values() for g in geoms)
+        rows = foot_contact_rows(world, data, feet)
     if len(rows) < 3:
         return None
     points = data.contact.pos[rows, :2]
@@ -172,7 +184,7 @@ class GuardVerdict:
     at_s: float  # trajectory time of that distance (s)
     robot_body: str
     env_body: str
-    com_margin: float | None  # m, None when not measured
+    com_margin: float | None  # m, None when not measured; a certified lower bound when it clears the limit
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -203,6 +215,10 @@ class LiveRiskMonitor:
             np.arange(adr, adr + 7) for adr in estimate.ids.object_qpos.values()
         ]  # free joints: 3 position + 4 quaternion
         self._feet: dict[int, tuple[World, frozenset[int]]] = {}  # id(world) -> its foot geoms
+        # id(world) -> the last exact CoM margin's contacts: (geom pairs, foot rows, their
+        # points, the CoM, the margin)
+        self._support: dict[int, tuple[bytes, list[int], FloatArray, FloatArray, float]] = {}
+        self.com_bounded = 0  # CoM margins a certified lower bound answered
         self._lock = threading.RLock()
         self._tracks: dict[tuple[int, str | None, frozenset[tuple[str, str]]], _Track] = {}
         self._geometry = self._geometry_key()
@@ -359,22 +375,51 @@ class LiveRiskMonitor:
             hi = int(np.searchsorted(times, t + self.config.lookahead_s, side="right"))
             if hi > lo:
                 track = self._track(qpos, carried, allow)
-                self._fill(track, lo, hi, carried, allow)
-                k = lo + int(np.argmin(track.dist[lo:hi]))  # the first of equal minima, as a scan
+                if track.window[:2] == (lo, hi):
+                    k = track.window[2]
+                else:
+                    self._fill(track, lo, hi, carried, allow)
+                    k = lo + int(np.argmin(track.dist[lo:hi]))  # the first of equal minima, as a scan
+                    track.window = (lo, hi, k)
                 if track.dist[k] < out[0]:
                     out = (float(track.dist[k]), float(times[k]), *track.names[k])
         return out
 
-    def com_margin(self, world: World, data: mujoco.MjData) -> float | None:
+    def com_margin(self, world: World, data: mujoco.MjData, at_least: float | None = None) -> float | None:
         """Margin of the measured CoM in the polygon of the current foot contacts (None: no support).
 
         ``data`` must hold a stepped (or ``mj_forward``-ed) state: contacts and ``subtree_com``.
+
+        ``at_least``: the margin may be a certified lower bound, if that bound is at least this.
+        The margin of a point in a convex hull moves by at most the point's move plus the
+        largest move of a hull vertex (each support value ``max_k u . p_k`` moves by at most
+        that), so while the contacts are the same geom pairs in the same order as at the last
+        exact margin, ``margin_then - max_k |p_k - p_k,then| - |c - c_then|`` is one. A test
+        of the result against a limit at or below ``at_least`` decides as the exact margin would.
         """
         cached = self._feet.get(id(world))
         if cached is None or cached[0] is not world:
             feet = frozenset(g for geoms in world.ids.foot_geoms.values() for g in geoms)
             cached = self._feet[id(world)] = (world, feet)
-        return contact_support_margin(world, data, cached[1])
+        if at_least is None:
+            return contact_support_margin(world, data, cached[1])
+        pairs = data.contact.geom.tobytes() if data.ncon else b""
+        com = data.subtree_com[world.ids.base_body][:2]
+        ref = self._support.get(id(world))
+        if ref is not None and ref[0] == pairs:
+            _, rows, points0, com0, margin0 = ref
+            shift = data.contact.pos[rows, :2]
+            shift -= points0
+            move = float(np.sqrt(np.add.reduce(shift * shift, axis=1)).max())
+            bound = margin0 - move - math.hypot(com[0] - com0[0], com[1] - com0[1])
+            if bound >= at_least:  # False for NaN
+                self.com_bounded += 1
+                return bound
+        rows = foot_contact_rows(world, data, cached[1])
+        margin = contact_support_margin(world, data, rows=rows)
+        if margin is not None:
+            self._support[id(world)] = (pairs, rows, data.contact.pos[rows, :2].copy(), com.copy(), margin)
+        return margin
 
     def check(
         self,

@@ -83,6 +83,22 @@ class Trajectory:
         normalise_quats(q, self.free_quat_adr)
         return q
 
+    def sample_many(self, times: FloatArray) -> FloatArray:
+        """:meth:`sample` at each of ``times`` at once: (len(times), nq).
+
+        The same interpolation as :meth:`sample`, row for row (the quaternions' norm is taken
+        along the row, which may round differently from ``np.linalg.norm`` in the last bit).
+        """
+        t = np.clip(np.asarray(times, dtype=float), 0.0, self.duration)
+        k = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 2)
+        t0, t1 = self.times[k], self.times[k + 1]
+        alpha = ((t - t0) / (t1 - t0))[:, None]
+        q = (1.0 - alpha) * self.qpos[k] + alpha * self.qpos[k + 1]
+        for a in self.free_quat_adr:
+            quat = q[:, a : a + 4]
+            quat /= np.sqrt(np.einsum("ij,ij->i", quat, quat))[:, None]
+        return q
+
 
 class TimedJoints(NamedTuple):
     """Dofs whose speed the timing bounds, and their (scaled) limits."""

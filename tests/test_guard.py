@@ -7,6 +7,8 @@ and with the guard no robot or book geom ever touches the stack.
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import mujoco
 import numpy as np
 import py_trees
@@ -279,6 +281,11 @@ def test_com_margin_equals_the_fall_models_polygon_on_real_contacts() -> None:
     scenario = load("book_transfer")
     truth, estimate = build(scenario), build(scenario)
     monitor = LiveRiskMonitor(estimate, scenario.risk.guard)
+    # A limit the leaning robot's margins cross (they stay above the scenario's 20 mm while a
+    # polygon exists), so the bound is tested on both sides of it.
+    limit = 0.10
+    guard_monitor = LiveRiskMonitor(estimate, replace(scenario.risk.guard, min_com_margin=limit))
+    below = 0  # states whose margin is under the guard's limit
     robot = SimulatedRobot(truth)
     target = truth.home_qpos()
     target[truth.model.jnt_qposadr[truth.model.joint("waist_pitch").id]] += 0.3  # lean forward
@@ -294,6 +301,18 @@ def test_com_margin_equals_the_fall_models_polygon_on_real_contacts() -> None:
             continue
         reference = signed_margin(polygon, truth.data.subtree_com[truth.ids.base_body][:2])
         assert monitor.com_margin(truth, truth.data) == pytest.approx(reference, abs=1e-12)
+        # The guard's form: a certified lower bound when it clears the limit, else exact; a
+        # test against the limit decides as the exact margin does.
+        got = guard_monitor.com_margin(truth, truth.data, at_least=limit)
+        assert got is not None and got <= reference + 1e-12
+        assert (got >= limit) == (reference >= limit)
+        if got < limit:
+            assert got == pytest.approx(reference, abs=1e-12)
+        below += reference < limit
         margins += 1
-    print(f"{margins} margins compared, {none} states without a polygon")
+    print(
+        f"{margins} margins compared, {none} states without a polygon, "
+        f"{guard_monitor.com_bounded} answered by the bound, {below} under the limit"
+    )
     assert margins >= 3
+    assert guard_monitor.com_bounded >= 3 and below >= 3

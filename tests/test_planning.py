@@ -438,6 +438,12 @@ def test_sample_and_top_down_quat(world: World, left_pick: dict[str, Trajectory]
     rot = np.empty(9)
     mujoco.mju_quat2Mat(rot, hand_top_down_quat((0.0, 2.0, 0.3)))
     assert np.allclose(rot.reshape(3, 3), [[-1, 0, 0], [0, 1, 0], [0, 0, -1]], atol=1e-12)
+    # Vectorised sampling (the behaviours' look-ahead) is sample() row for row, inside and beyond.
+    ts = np.concatenate([[-1.0], np.linspace(0.0, traj.duration, 97), [traj.duration + 1.0]])
+    many = traj.sample_many(ts)
+    assert many.shape == (len(ts), traj.qpos.shape[1])
+    assert np.abs(many - np.array([traj.sample(t) for t in ts])).max() < 1e-15
+    assert np.allclose(np.linalg.norm(many[:, 3:7], axis=1), 1.0, atol=1e-15)
     with pytest.raises(PlanningError):
         # An iteration budget too small for the move: a PlanningError, never an approximation.
         Planner(world, PlannerConfig(max_iterations=2)).move(
