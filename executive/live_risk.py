@@ -51,10 +51,21 @@ from executive.risk.collision import CollisionModel
 from executive.scenario_types import GuardConfig
 from executive.world import World
 
-__all__ = ["GuardVerdict", "LiveRiskMonitor", "contact_support_margin", "foot_contact_rows", "interior_margin"]
+__all__ = [
+    "GuardVerdict",
+    "LiveRiskMonitor",
+    "contact_support_margin",
+    "foot_contact_rows",
+    "interior_margin",
+]
 
 FloatArray = NDArray[np.float64]
 _TRACK_LIMIT = 512  # trajectories memoised; beyond, the memo starts afresh
+# A point at distance r from a geom's centre moves by |R1 - R0|_2 r when the geom turns from R0
+# to R1, and |R1 - R0|_2 = |R1 - R0|_F / sqrt(2) for rotations (R1 R0^T - I has singular values
+# 2 sin(theta/2), 2 sin(theta/2), 0); the factor a little above 1/sqrt(2) covers rounding.
+_ROTATION_NORM = (1.0 + 1e-9) / math.sqrt(2.0)
+_BOUND_SLACK = 1e-12  # m: rounding of the moves (about 2e-16 per metre of bounding radius)
 
 
 @dataclass(frozen=True)
@@ -68,7 +79,7 @@ class _NowReference:
     n_robot: int
     pos: FloatArray  # (G, 3) geom_xpos then
     rot: FloatArray  # (G, 9) geom_xmat then
-    radius: FloatArray  # (G,) geom_rbound
+    radius: FloatArray  # (G,) geom_rbound times _ROTATION_NORM
 
 
 class _Track:
@@ -287,11 +298,13 @@ class LiveRiskMonitor:
 
     def _movers(self, carried: str | None) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
         """Geoms that move with the configuration: the robot's side (its geoms and the carried
-        object's) and the environment's (the other objects); the table and obstacles do not."""
+        object's) and the environment's (the objects); the table and obstacles do not. The
+        carried object is on both sides: the collision model also checks it, as environment,
+        against the robot's own geoms (the other hand), a pair in which both ends move."""
         robot = self._robot_geoms
         if carried is not None and carried in self._object_geom:
             robot = np.append(robot, self._object_geom[carried])
-        env = np.array([g for name, g in self._object_geom.items() if name != carried], dtype=np.intp)
+        env = np.array(list(self._object_geom.values()), dtype=np.intp)
         return robot, env
 
     def _now_distance(
@@ -300,7 +313,7 @@ class LiveRiskMonitor:
         """Distance at the measured configuration ``now`` (caller holds the lock and has refreshed).
 
         Exact, or, when ``at_least`` is given, possibly a certified lower bound that is at least
-        ``at_least``: every point of a geom moves by at most ``|dc| + |dR|_F r`` (centre shift,
+        ``at_least``: every point of a geom moves by at most ``|dc| + |dR|_2 r`` (centre shift,
         change of its rotation matrix, bounding radius ``geom_rbound``) from where it was at the
         last exact computation, so the distance of any (robot side, environment) pair dropped by
         at most the largest such move of the robot side plus that of the environment's moving
@@ -321,7 +334,7 @@ class LiveRiskMonitor:
             turn -= ref.rot
             move = np.sqrt(np.add.reduce(shift * shift, axis=1))
             move += np.sqrt(np.add.reduce(turn * turn, axis=1)) * ref.radius
-            bound = ref.distance - float(move[: ref.n_robot].max())
+            bound = ref.distance - _BOUND_SLACK - float(move[: ref.n_robot].max())
             if ref.n_robot < len(move):
                 bound -= float(move[ref.n_robot :].max())
             if bound >= at_least:
@@ -343,7 +356,7 @@ class LiveRiskMonitor:
                 n_robot=len(robot),
                 pos=data.geom_xpos[geoms].copy(),
                 rot=data.geom_xmat[geoms].copy(),
-                radius=self.collision.model.geom_rbound[geoms].copy(),
+                radius=self.collision.model.geom_rbound[geoms] * _ROTATION_NORM,
             )
         return float(knot.distance), knot.robot_body_name, knot.env_body_name
 

@@ -83,16 +83,22 @@ class Trajectory:
         normalise_quats(q, self.free_quat_adr)
         return q
 
+    def knot_weights(self, times: FloatArray) -> tuple[NDArray[np.intp], FloatArray]:
+        """Where each of ``times`` (clamped to [0, duration]) falls: the knot ``k`` before it and
+        the weight ``alpha`` of knot ``k + 1`` (:meth:`sample` is ``(1 - alpha) q_k + alpha q_k+1``)."""
+        t = np.clip(np.asarray(times, dtype=float), 0.0, self.duration)
+        k = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 2)
+        t0, t1 = self.times[k], self.times[k + 1]
+        return k, (t - t0) / (t1 - t0)
+
     def sample_many(self, times: FloatArray) -> FloatArray:
         """:meth:`sample` at each of ``times`` at once: (len(times), nq).
 
         The same interpolation as :meth:`sample`, row for row (the quaternions' norm is taken
         along the row, which may round differently from ``np.linalg.norm`` in the last bit).
         """
-        t = np.clip(np.asarray(times, dtype=float), 0.0, self.duration)
-        k = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 2)
-        t0, t1 = self.times[k], self.times[k + 1]
-        alpha = ((t - t0) / (t1 - t0))[:, None]
+        k, weight = self.knot_weights(times)
+        alpha = weight[:, None]
         q = (1.0 - alpha) * self.qpos[k] + alpha * self.qpos[k + 1]
         for a in self.free_quat_adr:
             quat = q[:, a : a + 4]

@@ -79,3 +79,32 @@ def test_grasp_on_empty_air_fails_naming_the_missing_hold(world: World) -> None:
     assert longest < robot.control_dt
     # the jaws really closed (physics), they just found nothing
     assert robot.gripper_opening("left") < 0.005
+
+
+def test_move_hand_streams_the_sampled_targets(world: World) -> None:
+    """Each tick's target is the trajectory sampled at that tick's time, its rate the difference
+    to the next tick's target, whether the clock advances one period per tick (targets sampled
+    ahead) or jumps (sampled afresh at its own time)."""
+    site = world.ids.hand_sites["right"]
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, world.data.site_xmat[site])
+    goal = HandTarget("right", world.data.site_xpos[site] + [0.10, -0.05, 0.15], quat)
+    trajectory = Planner(world).move(world.home_qpos(), [goal], name="right.reach")
+
+    robot = SimulatedRobot(build(world.scenario), control_dt=0.02)
+    install(robot)
+    behaviour = MoveHand("right.reach", trajectory)
+    behaviour.initialise()
+    dt, ticks = robot.control_dt, 0
+    start = robot.time
+    while robot.time - start < trajectory.duration:
+        t = robot.time - start
+        assert behaviour.update() == Status.RUNNING
+        assert np.allclose(robot.q_target, trajectory.sample(t), atol=1e-12)
+        rate = (trajectory.sample(t + dt) - trajectory.sample(t)) / dt
+        assert np.allclose(robot.qvel_target, rate, atol=1e-9)
+        ticks += 1
+        # The clock as the physics leaves it (MuJoCo adds the timestep per step); once, a jump.
+        for _ in range(robot.substeps * (3 if ticks == 40 else 1)):
+            robot.data.time += robot.model.opt.timestep
+    assert ticks > 50
