@@ -25,6 +25,13 @@ __all__ = ["JointTargetController", "SimulatedRobot"]
 FloatArray = NDArray[np.float64]
 
 
+def _as_slice(index: NDArray[np.int_]) -> slice | NDArray[np.int_]:
+    """``index`` as a slice when it is a contiguous ascending run (numpy then takes a view)."""
+    if len(index) and np.array_equal(index, np.arange(index[0], index[0] + len(index))):
+        return slice(int(index[0]), int(index[0]) + len(index))
+    return index
+
+
 class JointTargetController:
     """Maps a full-model qpos target to the robot's position-servo ctrl.
 
@@ -97,6 +104,15 @@ class JointTargetController:
         self._ramp: NDArray[np.floating[Any]] = np.zeros((0, 1))
         self._gravity = np.empty(model.nv)
         self._jac = np.empty((6 * len(self.feet), model.nv))
+        # leg_load's index work: slices where the indices are contiguous (views, no copies)
+        self._foot_rows = [
+            (foot, self._jac[6 * i : 6 * i + 3], self._jac[6 * i + 3 : 6 * i + 6])
+            for i, foot in enumerate(self.feet)
+        ]
+        self._base_take = _as_slice(self.base_dofs)
+        self._leg_take = _as_slice(self._leg_dofs)
+        self._support_take = _as_slice(self._support_idx)
+        self._y = np.empty(6)
         self.ctrl_low = model.actuator_ctrlrange[self.actuators, 0]
         self.ctrl_high = model.actuator_ctrlrange[self.actuators, 1]
 
@@ -115,19 +131,19 @@ class JointTargetController:
         mujoco.mj_comPos(model, d)
         gravity, jac = self._gravity, self._jac
         mujoco.mj_rne(model, d, 0, gravity)  # qvel = 0, no acceleration: gravity only
-        for i, foot in enumerate(self.feet):
-            mujoco.mj_jacBody(model, d, jac[6 * i : 6 * i + 3], jac[6 * i + 3 : 6 * i + 6], foot)
-        base = jac[:, self.base_dofs]  # A^T
-        g_base = gravity[self.base_dofs]
+        for i, (foot, pos, rot) in enumerate(self._foot_rows):
+            mujoco.mj_jacBody(model, d, pos, rot, foot)
+        base = jac[:, self._base_take]  # A^T (a view when the base's dofs are contiguous)
+        g_base = gravity[self._base_take]
         normal = base.T @ base
         if mujoco.mju_cholFactor(normal, 0.0) == len(g_base):
-            y = np.empty(len(g_base))
+            y = self._y
             mujoco.mju_cholSolve(y, normal, g_base)
             wrench = base @ y
         else:  # a degenerate stance (never on two feet): least squares
             wrench = np.linalg.lstsq(base.T, g_base, rcond=None)[0]
         load = np.zeros(len(self.dof_adr))
-        load[self.support] = gravity[self._leg_dofs] - jac[:, self._leg_dofs].T @ wrench
+        load[self._support_take] = gravity[self._leg_take] - jac[:, self._leg_take].T @ wrench
         return load
 
     def joint_ctrl(
