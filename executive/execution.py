@@ -131,7 +131,7 @@ class JointTargetController:
         mujoco.mj_comPos(model, d)
         gravity, jac = self._gravity, self._jac
         mujoco.mj_rne(model, d, 0, gravity)  # qvel = 0, no acceleration: gravity only
-        for i, (foot, pos, rot) in enumerate(self._foot_rows):
+        for foot, pos, rot in self._foot_rows:
             mujoco.mj_jacBody(model, d, pos, rot, foot)
         base = jac[:, self._base_take]  # A^T (a view when the base's dofs are contiguous)
         g_base = gravity[self._base_take]

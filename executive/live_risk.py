@@ -41,6 +41,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import mujoco
 import numpy as np
@@ -183,9 +184,11 @@ def contact_support_margin(
         return None
 
 
-@dataclass(frozen=True)
-class GuardVerdict:
-    """What one live check found. ``ok`` False names the limit crossed in ``reason``."""
+class GuardVerdict(NamedTuple):
+    """What one live check found. ``ok`` False names the limit crossed in ``reason``.
+
+    A named tuple: one is made on every guarded tick (a frozen dataclass costs several times more).
+    """
 
     ok: bool
     reason: str
@@ -223,7 +226,7 @@ class LiveRiskMonitor:
         self.config = config
         self.collision = collision_model or CollisionModel(estimate, estimate.scenario.risk)
         self._object_qpos = [
-            np.arange(adr, adr + 7) for adr in estimate.ids.object_qpos.values()
+            slice(adr, adr + 7) for adr in estimate.ids.object_qpos.values()
         ]  # free joints: 3 position + 4 quaternion
         self._feet: dict[int, tuple[World, frozenset[int]]] = {}  # id(world) -> its foot geoms
         # id(world) -> the last exact CoM margin's contacts: (geom pairs, foot rows, their
@@ -232,6 +235,9 @@ class LiveRiskMonitor:
         self.com_bounded = 0  # CoM margins a certified lower bound answered
         self._lock = threading.RLock()
         self._tracks: dict[tuple[int, str | None, frozenset[tuple[str, str]]], _Track] = {}
+        m = self.collision.model
+        # views into the model's own arrays (read afresh on each check through the views)
+        self._geometry_arrays = (m.body_pos, m.body_quat, m.geom_pos, m.geom_quat, m.geom_size)
         self._geometry = self._geometry_key()
         self.knots_computed = 0  # planned knots whose distance was computed (not memoised)
         # The measured configuration's distance: the last exact one per (carried, allow), with
@@ -246,8 +252,7 @@ class LiveRiskMonitor:
 
     def _geometry_key(self) -> bytes:
         """What a knot's distance depends on besides the knot: the estimate's geometry."""
-        m = self.collision.model
-        return b"".join(a.tobytes() for a in (m.body_pos, m.body_quat, m.geom_pos, m.geom_quat, m.geom_size))
+        return b"".join(a.tobytes() for a in self._geometry_arrays)
 
     def _refresh(self) -> None:
         """Forget the memoised knots when the estimate's geometry changed (caller holds the lock)."""
@@ -292,8 +297,8 @@ class LiveRiskMonitor:
     def configuration(self, measured_qpos: FloatArray, planned_qpos: FloatArray) -> FloatArray:
         """The robot where it is measured, the objects where the plan has them (the estimate)."""
         q = np.array(measured_qpos, dtype=float, copy=True)
-        for idx in self._object_qpos:
-            q[idx] = planned_qpos[idx]
+        for part in self._object_qpos:
+            q[part] = planned_qpos[part]
         return q
 
     def _movers(self, carried: str | None) -> tuple[NDArray[np.intp], NDArray[np.intp]]:
@@ -378,14 +383,14 @@ class LiveRiskMonitor:
         """
         times = np.asarray(trajectory_times, dtype=float)
         qpos = np.asarray(trajectory_qpos, dtype=float)
-        k_now = min(max(int(np.searchsorted(times, t)), 0), len(times) - 1)
+        k_now = min(int(times.searchsorted(t)), len(times) - 1)
         now = self.configuration(measured_qpos, qpos[k_now])
         with self._lock:
             self._refresh()
             d_now, robot_body, env_body = self._now_distance(now, carried, allow, at_least)
             out = (d_now, t, robot_body, env_body)
-            lo = int(np.searchsorted(times, t, side="right"))
-            hi = int(np.searchsorted(times, t + self.config.lookahead_s, side="right"))
+            lo = int(times.searchsorted(t, side="right"))
+            hi = int(times.searchsorted(t + self.config.lookahead_s, side="right"))
             if hi > lo:
                 track = self._track(qpos, carried, allow)
                 if track.window[:2] == (lo, hi):
@@ -416,12 +421,13 @@ class LiveRiskMonitor:
             cached = self._feet[id(world)] = (world, feet)
         if at_least is None:
             return contact_support_margin(world, data, cached[1])
-        pairs = data.contact.geom.tobytes() if data.ncon else b""
+        contact = data.contact
+        pairs = contact.geom.tobytes() if data.ncon else b""
         com = data.subtree_com[world.ids.base_body][:2]
         ref = self._support.get(id(world))
         if ref is not None and ref[0] == pairs:
             _, rows, points0, com0, margin0 = ref
-            shift = data.contact.pos[rows, :2]
+            shift = contact.pos[rows, :2]
             shift -= points0
             move = float(np.sqrt(np.add.reduce(shift * shift, axis=1)).max())
             bound = margin0 - move - math.hypot(com[0] - com0[0], com[1] - com0[1])
