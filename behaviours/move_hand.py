@@ -8,6 +8,7 @@ import numpy as np
 import py_trees
 
 from behaviours.robot_access import RobotBehaviour
+from executive.execution import SimulatedRobot
 from executive.planning import Trajectory
 
 __all__ = ["Carry", "Home", "Lift", "MoveHand", "Place", "Retreat"]
@@ -27,10 +28,13 @@ class MoveHand(RobotBehaviour):
     The targets of the coming ticks are sampled ahead, ``chunk`` control periods at a time
     (:meth:`Trajectory.sample_many`, one vectorised call instead of two samples per tick); a
     tick whose trajectory time is not the next sampled one (a host's robot whose clock does
-    not advance by exactly one period per tick) samples afresh from its own time.
+    not advance by exactly one period per tick) samples afresh from its own time. On the bundled
+    physics (:class:`executive.execution.SimulatedRobot`) the legs' static load of each sampled
+    target (the leg servos' feed-forward) is computed with them, in one batch
+    (:meth:`executive.execution.JointTargetController.leg_loads`).
     """
 
-    chunk: int = 50  # control periods sampled ahead (1 s at 50 Hz)
+    chunk: int = 25  # control periods sampled ahead (0.5 s at 50 Hz)
 
     phase: str = "free"  # what the detectors are told: free / lift / carry / place
 
@@ -51,9 +55,10 @@ class MoveHand(RobotBehaviour):
         self.settle_s = settle_s
         self._t0 = 0.0
         self._robot: Any = None  # set in initialise
-        self._ahead_t = np.zeros(0)  # trajectory times of the targets sampled ahead
+        self._ahead_t: np.ndarray = np.zeros(0)  # trajectory times of the targets sampled ahead
         self._ahead_q = np.zeros((0, 0))  # their qpos rows (one more than times: the next target)
         self._ahead_i = 0  # the row of the next tick
+        self._ahead_load: np.ndarray | None = None  # leg loads of the sampled targets (bundled physics)
 
     @property
     def started_at(self) -> float:
@@ -83,7 +88,10 @@ class MoveHand(RobotBehaviour):
             return Status.FAILURE
         t = robot.time - self._t0
         q, qvel = self._targets(t, robot.control_dt)
-        robot.set_joint_targets(q, qvel)
+        if self._ahead_load is not None:
+            robot.set_joint_targets(q, qvel, leg_load=self._ahead_load[self._ahead_i - 1])
+        else:
+            robot.set_joint_targets(q, qvel)
         if t < self.trajectory.duration:
             self.feedback_message = f"{self.trajectory.name}: {t:.2f}/{self.trajectory.duration:.2f} s"
             return Status.RUNNING
@@ -103,8 +111,13 @@ class MoveHand(RobotBehaviour):
         """The target at trajectory time ``t`` and its rate over the period, (q(t + dt) - q(t)) / dt."""
         i = self._ahead_i
         if i >= len(self._ahead_t) or abs(self._ahead_t[i] - t) > 1e-9:  # 1 ns: clock rounding only
-            self._ahead_t = t + dt * np.arange(self.chunk)
-            self._ahead_q = self.trajectory.sample_many(t + dt * np.arange(self.chunk + 1))
+            times = t + dt * np.arange(self.chunk + 1, dtype=np.float64)
+            self._ahead_t = times[:-1]
+            self._ahead_q = self.trajectory.sample_many(times)
+            robot = self._robot
+            self._ahead_load = (
+                robot.controller.leg_loads(self._ahead_q[:-1]) if isinstance(robot, SimulatedRobot) else None
+            )
             i = 0
         self._ahead_i = i + 1
         q = self._ahead_q[i]

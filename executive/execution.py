@@ -146,6 +146,39 @@ class JointTargetController:
         load[self._support_take] = gravity[self._leg_take] - jac[:, self._leg_take].T @ wrench
         return load
 
+    def leg_loads(self, q_targets: FloatArray) -> FloatArray:
+        """:meth:`leg_load` of each row of ``q_targets`` (N, nq), the least-squares part in one
+        batch (N, actuators): for a stream of targets known ahead (one call per second of motion
+        instead of one per control period). Equal to :meth:`leg_load` row by row to rounding."""
+        q_targets = np.atleast_2d(np.asarray(q_targets, dtype=float))
+        n = len(q_targets)
+        model, d = self.model, self._scratch
+        gravity = np.empty((n, model.nv))
+        jac = np.empty((n, 6 * len(self.feet), model.nv))
+        d.qvel[:] = 0.0
+        for k, q in enumerate(q_targets):
+            d.qpos[:] = q
+            mujoco.mj_kinematics(model, d)
+            mujoco.mj_comPos(model, d)
+            mujoco.mj_rne(model, d, 0, gravity[k])
+            for i, foot in enumerate(self.feet):
+                mujoco.mj_jacBody(model, d, jac[k, 6 * i : 6 * i + 3], jac[k, 6 * i + 3 : 6 * i + 6], foot)
+        base = jac[:, :, self._base_take]  # (N, 12, 6): A^T per target
+        g_base = gravity[:, self._base_take]
+        normal = np.matmul(base.transpose(0, 2, 1), base)
+        try:
+            np.linalg.cholesky(normal)  # every stance well posed (two feet: always)
+        except np.linalg.LinAlgError:
+            return np.array([self.leg_load(q) for q in q_targets])
+        y = np.linalg.solve(normal, g_base[:, :, None])
+        wrench = np.matmul(base, y)[:, :, 0]
+        loads = np.zeros((n, len(self.dof_adr)))
+        legs = jac[:, :, self._leg_take]  # (N, 12, legs)
+        loads[:, self._support_take] = (
+            gravity[:, self._leg_take] - np.matmul(legs.transpose(0, 2, 1), wrench[:, :, None])[:, :, 0]
+        )
+        return loads
+
     def joint_ctrl(
         self,
         q_target: FloatArray,
@@ -261,16 +294,28 @@ class SimulatedRobot:
     def failure(self) -> Failure | None:
         return self.detector.failure
 
-    def set_joint_targets(self, q_target: FloatArray, qvel_target: FloatArray | None = None) -> None:
+    def set_joint_targets(
+        self,
+        q_target: FloatArray,
+        qvel_target: FloatArray | None = None,
+        *,
+        leg_load: FloatArray | None = None,
+    ) -> None:
         """Targets for every robot joint, given as a full-model qpos (object entries ignored).
 
         ``qvel_target`` (same layout, d q_target / dt): the target moves on at this rate during
         the control period (the servos track a ramp, not a staircase) and the servos' damping
         is fed forward. None: a fixed target.
+
+        ``leg_load``: ``controller.leg_load(q_target)`` if the caller has it already (e.g. from
+        :meth:`JointTargetController.leg_loads` over targets known ahead); None: computed here
+        for a new target.
         """
         q = np.asarray(q_target, dtype=float)
         old = self.q_target
-        if q.shape != old.shape or not (q == old).all():  # np.array_equal, without its wrapper
+        if leg_load is not None:
+            self._leg_load = leg_load
+        elif q.shape != old.shape or not (q == old).all():  # np.array_equal, without its wrapper
             self._leg_load = self.controller.leg_load(q)
         self.q_target = q
         self.qvel_target = np.zeros(self.model.nq) if qvel_target is None else np.asarray(qvel_target, float)

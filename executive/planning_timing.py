@@ -25,7 +25,7 @@ from typing import NamedTuple
 
 import mujoco
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from executive.planning_limits import GeomPairCollisionLimit, SupportPolygon
 from executive.planning_types import PlannerConfig, PlanningError, Relative
@@ -83,7 +83,7 @@ class Trajectory:
         normalise_quats(q, self.free_quat_adr)
         return q
 
-    def knot_weights(self, times: FloatArray) -> tuple[NDArray[np.intp], FloatArray]:
+    def knot_weights(self, times: ArrayLike) -> tuple[NDArray[np.intp], FloatArray]:
         """Where each of ``times`` (clamped to [0, duration]) falls: the knot ``k`` before it and
         the weight ``alpha`` of knot ``k + 1`` (:meth:`sample` is ``(1 - alpha) q_k + alpha q_k+1``)."""
         t = np.clip(np.asarray(times, dtype=float), 0.0, self.duration)
@@ -91,7 +91,7 @@ class Trajectory:
         t0, t1 = self.times[k], self.times[k + 1]
         return k, (t - t0) / (t1 - t0)
 
-    def sample_many(self, times: FloatArray) -> FloatArray:
+    def sample_many(self, times: ArrayLike) -> FloatArray:
         """:meth:`sample` at each of ``times`` at once: (len(times), nq).
 
         The same interpolation as :meth:`sample`, row for row (the quaternions' norm is taken

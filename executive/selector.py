@@ -31,6 +31,7 @@ line naming it (checked in :meth:`RiskSelector._start`).
 from __future__ import annotations
 
 import concurrent.futures
+import math
 import time
 from collections.abc import Callable, Iterator, Sequence
 from typing import Any
@@ -478,5 +479,27 @@ class RiskSelector(py_trees.composites.Composite):
         self.outcome = outcome
         if failure is not None:
             self.failure = failure
-        self.log.record("outcome", task=self.name, outcome=outcome, chosen=self.chosen, failure=self.failure)
+        self.log.record(
+            "outcome",
+            task=self.name,
+            outcome=outcome,
+            chosen=self.chosen,
+            failure=self.failure,
+            closest_call=self._closest_call(),
+        )
         return Status.SUCCESS if outcome == "success" else Status.FAILURE
+
+    def _closest_call(self) -> dict[str, Any] | None:
+        """The detectors' near-miss record of the run so far (None: no detector keeps one)."""
+        call = getattr(getattr(self.bb.robot, "detector", None), "closest_call", None)
+        if call is None:
+            return None
+        return {
+            "distance": call.distance if math.isfinite(call.distance) else None,  # m; None: beyond horizon
+            "bodies": list(call.distance_bodies),
+            "time": call.distance_time,
+            "ignored_force": call.ignored_force,
+            "ignored_bodies": list(call.ignored_bodies),
+            "self_contacts": call.self_contacts,
+            "summary": call.describe(),
+        }

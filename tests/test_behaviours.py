@@ -84,7 +84,8 @@ def test_grasp_on_empty_air_fails_naming_the_missing_hold(world: World) -> None:
 def test_move_hand_streams_the_sampled_targets(world: World) -> None:
     """Each tick's target is the trajectory sampled at that tick's time, its rate the difference
     to the next tick's target, whether the clock advances one period per tick (targets sampled
-    ahead) or jumps (sampled afresh at its own time)."""
+    ahead) or jumps (sampled afresh at its own time); the legs' feed-forward load, computed in
+    batches ahead, is the static load of that very target (leg_load, one target at a time)."""
     site = world.ids.hand_sites["right"]
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, world.data.site_xmat[site])
@@ -103,6 +104,9 @@ def test_move_hand_streams_the_sampled_targets(world: World) -> None:
         assert np.allclose(robot.q_target, trajectory.sample(t), atol=1e-12)
         rate = (trajectory.sample(t + dt) - trajectory.sample(t)) / dt
         assert np.allclose(robot.qvel_target, rate, atol=1e-9)
+        exact = robot.controller.leg_load(robot.q_target)
+        assert np.abs(exact).max() > 10.0  # N m: the legs carry the body
+        assert np.allclose(robot._leg_load, exact, rtol=0.0, atol=1e-9)
         ticks += 1
         # The clock as the physics leaves it (MuJoCo adds the timestep per step); once, a jump.
         for _ in range(robot.substeps * (3 if ticks == 40 else 1)):

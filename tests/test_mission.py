@@ -81,6 +81,11 @@ def test_run_chooses_the_handover_and_places_the_book(tmp_path: Path) -> None:
     assert kinds.count("plan") == 3 and "selection" in kinds and "execute" in kinds and "placed" in kinds
     assert [e["seq"] for e in entries] == list(range(len(entries)))
     _check_gate(entries, summary["threshold"])
+    # The detectors' near-miss record rides on the outcome line: nothing touched, the closest
+    # forbidden pair within the detector's 0.2 m horizon (a hand and the scene).
+    (outcome,) = [e for e in entries if e["kind"] == "outcome"]
+    call = outcome["closest_call"]
+    assert 0.0 < call["distance"] < 0.2 and len(call["bodies"]) == 2 and "mm" in call["summary"]
     assert (out / "task0" / "left_to_right_com.png").is_file()
     assert (out / "task0" / "left_to_right_distance.png").is_file()
     assert "left_to_right" in proc.stdout and "success" in proc.stdout
