@@ -230,6 +230,12 @@ def build_trajectory(
 
     A carried object is re-attached to its hand at every knot, so it moves rigidly with it.
     """
+
+    def timing_failure(message: str) -> PlanningError:
+        """The timed motion breaks a limit: no hand fell short (both reached, errors 0) after all
+        the path's IK iterations."""
+        return PlanningError(name, None, 0.0, 0.0, len(path) - 1, message)
+
     # The hands' (and so a carried object's) speed is bounded too: the servos' tracking error
     # grows with it, and clearance is planned against that error.
     sites = list(frames.hand_sites.values())
@@ -258,12 +264,7 @@ def build_trajectory(
         # The CoM's acceleration scales with 1/T^2 on the same path: stretch and check again.
         duration = float(times[-1]) * cfg.zmp_stretch
     else:
-        raise PlanningError(
-            name,
-            None,
-            0.0,
-            0.0,
-            len(path) - 1,
+        raise timing_failure(
             f"motion '{name}': the zero-moment point comes {worst_zmp:.4f} m from the support polygon's "
             f"edge even at {times[-1]:.1f} s (needs {needed:.3f} m)",
         )
@@ -292,24 +293,14 @@ def build_trajectory(
         j = int(at_k[np.argmin(gaps[at_k])])
         i = int(pairs[j])
         n1, n2 = (str(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)) for g in collisions.pairs[i])
-        raise PlanningError(
-            name,
-            None,
-            0.0,
-            0.0,
-            len(path) - 1,
+        raise timing_failure(
             f"motion '{name}': geoms '{n1}' and '{n2}' come within "
             f"{distance[j]:.4f} m at t = {times[k]:.2f} s "
             f"(clearance {floor[i] + cfg.clearance_tolerance:.3f} m)",
         )
     worst = float(np.min(polygon.margins(com)))
     if worst < cfg.support_margin - 1e-9:
-        raise PlanningError(
-            name,
-            None,
-            0.0,
-            0.0,
-            len(path) - 1,
+        raise timing_failure(
             f"motion '{name}': the CoM comes {worst:.4f} m from the support polygon's edge "
             f"(needs {cfg.support_margin:.3f} m)",
         )
