@@ -102,55 +102,29 @@ class JointTargetController:
         self._fixed = np.zeros(len(self.actuators))
         self._ramp_key: tuple[int, float] | None = None
         self._ramp: NDArray[np.floating[Any]] = np.zeros((0, 1))
-        self._gravity = np.empty(model.nv)
-        self._jac = np.empty((6 * len(self.feet), model.nv))
-        # leg_load's index work: slices where the indices are contiguous (views, no copies)
-        self._foot_rows = [
-            (foot, self._jac[6 * i : 6 * i + 3], self._jac[6 * i + 3 : 6 * i + 6])
-            for i, foot in enumerate(self.feet)
-        ]
+        # leg_loads' index work: slices where the indices are contiguous (views, no copies)
         self._base_take = _as_slice(self.base_dofs)
         self._leg_take = _as_slice(self._leg_dofs)
         self._support_take = _as_slice(self._support_idx)
-        self._y = np.empty(6)
         self.ctrl_low = model.actuator_ctrlrange[self.actuators, 0]
         self.ctrl_high = model.actuator_ctrlrange[self.actuators, 1]
 
     def leg_load(self, q_target: FloatArray) -> FloatArray:
-        """Static torque of each leg actuator holding ``q_target`` on both feet (0 elsewhere).
-
-        The support wrenches are the minimum-norm solution of ``A f = g_base`` (``A`` =
-        ``J_c,base^T``, 6 x 12, full row rank: each foot's base block is a rigid transform):
-        ``f = A^T (A A^T)^-1 g_base``, by a Cholesky solve of the 6 x 6 ``A A^T`` (what
-        ``numpy.linalg.lstsq`` returns, to rounding, at a fraction of its cost per tick).
-        """
-        model, d = self.model, self._scratch
-        d.qpos[:] = q_target
-        d.qvel[:] = 0.0
-        mujoco.mj_kinematics(model, d)
-        mujoco.mj_comPos(model, d)
-        gravity, jac = self._gravity, self._jac
-        mujoco.mj_rne(model, d, 0, gravity)  # qvel = 0, no acceleration: gravity only
-        for foot, pos, rot in self._foot_rows:
-            mujoco.mj_jacBody(model, d, pos, rot, foot)
-        base = jac[:, self._base_take]  # A^T (a view when the base's dofs are contiguous)
-        g_base = gravity[self._base_take]
-        normal = base.T @ base
-        if mujoco.mju_cholFactor(normal, 0.0) == len(g_base):
-            y = self._y
-            mujoco.mju_cholSolve(y, normal, g_base)
-            wrench = base @ y
-        else:  # a degenerate stance (never on two feet): least squares
-            wrench = np.linalg.lstsq(base.T, g_base, rcond=None)[0]
-        load = np.zeros(len(self.dof_adr))
-        load[self._support_take] = gravity[self._leg_take] - jac[:, self._leg_take].T @ wrench
-        return load
+        """Static torque of each leg actuator holding ``q_target`` on both feet (0 elsewhere):
+        :meth:`leg_loads` of the one target."""
+        return self.leg_loads(np.asarray(q_target, dtype=float)[None, :])[0]
 
     def leg_loads(self, q_targets: FloatArray) -> FloatArray:
-        """:meth:`leg_load` of each row of ``q_targets`` (N, nq), the least-squares part in one
-        batch (N, actuators): for a stream of targets known ahead (one call per second of motion
-        instead of one per control period). Equal to :meth:`leg_load` row by row to rounding."""
-        q_targets = np.atleast_2d(np.asarray(q_targets, dtype=float))
+        """:meth:`leg_load` of each row of ``q_targets`` (N, nq): (N, actuators).
+
+        Per target, MuJoCo's gravity torques (``mj_rne`` at rest) and the feet's Jacobians; the
+        support wrenches are then the minimum-norm solution of ``A f = g_base`` (``A`` =
+        ``J_c,base^T``, 6 x 12, full row rank: each foot's base block is a rigid transform),
+        ``f = A^T (A A^T)^-1 g_base`` (what ``numpy.linalg.lstsq`` returns, to rounding), solved
+        for all targets in one batch. A stream of targets known ahead
+        (:class:`behaviours.move_hand.MoveHand`) asks for half a second of them at once.
+        """
+        q_targets = np.asarray(q_targets, dtype=float)
         n = len(q_targets)
         model, d = self.model, self._scratch
         gravity = np.empty((n, model.nv))
@@ -160,18 +134,19 @@ class JointTargetController:
             d.qpos[:] = q
             mujoco.mj_kinematics(model, d)
             mujoco.mj_comPos(model, d)
-            mujoco.mj_rne(model, d, 0, gravity[k])
+            mujoco.mj_rne(model, d, 0, gravity[k])  # qvel = 0, no acceleration: gravity only
             for i, foot in enumerate(self.feet):
                 mujoco.mj_jacBody(model, d, jac[k, 6 * i : 6 * i + 3], jac[k, 6 * i + 3 : 6 * i + 6], foot)
         base = jac[:, :, self._base_take]  # (N, 12, 6): A^T per target
         g_base = gravity[:, self._base_take]
-        normal = np.matmul(base.transpose(0, 2, 1), base)
+        normal = np.matmul(base.transpose(0, 2, 1), base)  # A A^T
         try:
-            np.linalg.cholesky(normal)  # every stance well posed (two feet: always)
-        except np.linalg.LinAlgError:
-            return np.array([self.leg_load(q) for q in q_targets])
-        y = np.linalg.solve(normal, g_base[:, :, None])
-        wrench = np.matmul(base, y)[:, :, 0]
+            np.linalg.cholesky(normal)  # positive definite: every stance well posed (two feet)
+            wrench = np.matmul(base, np.linalg.solve(normal, g_base[:, :, None]))[:, :, 0]
+        except np.linalg.LinAlgError:  # a degenerate stance (never on two feet): least squares
+            wrench = np.array(
+                [np.linalg.lstsq(b.T, g, rcond=None)[0] for b, g in zip(base, g_base, strict=True)]
+            )
         loads = np.zeros((n, len(self.dof_adr)))
         legs = jac[:, :, self._leg_take]  # (N, 12, legs)
         loads[:, self._support_take] = (

@@ -151,10 +151,11 @@ def test_servo_period_writes_joint_ctrl_bit_for_bit_at_every_physics_step() -> N
             mujoco.mj_step(m, d)  # qfrc_bias changes from step to step, the period's ctrl does not
 
 
-def test_leg_load_is_the_least_squares_support_of_the_target_pose() -> None:
-    """The Cholesky solve of the support wrenches against ``numpy.linalg.lstsq`` of the base's
-    equilibrium ``J_c,base^T f = g_base``, on perturbed stances; and the result is static:
-    the floating base's gravity is carried by the feet (``J_c,base^T f = g_base`` holds)."""
+def test_leg_load_is_the_least_squares_support_of_the_target_pose(monkeypatch: pytest.MonkeyPatch) -> None:
+    """The batched normal-equations solve of the support wrenches against ``numpy.linalg.lstsq``
+    of the base's equilibrium ``J_c,base^T f = g_base``, on perturbed stances, one at a time and
+    all 20 in one batch, and through the least-squares fallback for a degenerate stance; and the
+    result is static: the floating base's gravity is carried by the feet."""
     import mujoco
 
     from executive.execution import JointTargetController
@@ -163,6 +164,7 @@ def test_leg_load_is_the_least_squares_support_of_the_target_pose() -> None:
     c, m = JointTargetController(world), world.model
     d = mujoco.MjData(m)
     rng = np.random.default_rng(5)
+    stances, references = [], []
     for _ in range(20):
         q = world.home_qpos()
         q[c.qpos_adr] += rng.normal(0.0, 0.1, len(c.qpos_adr))
@@ -175,6 +177,15 @@ def test_leg_load_is_the_least_squares_support_of_the_target_pose() -> None:
         assert np.allclose(jac[:, c.base_dofs].T @ wrench, gravity[c.base_dofs], atol=1e-9)
         expected = np.where(c.support, gravity[c.dof_adr] - jac[:, c.dof_adr].T @ wrench, 0.0)
         assert np.allclose(c.leg_load(q), expected, rtol=1e-10, atol=1e-10)
+        stances.append(q)
+        references.append(expected)
+    assert np.allclose(c.leg_loads(np.array(stances)), references, rtol=1e-10, atol=1e-10)
+
+    def not_positive_definite(a: np.ndarray) -> np.ndarray:
+        raise np.linalg.LinAlgError("forced: the degenerate-stance path")
+
+    monkeypatch.setattr(np.linalg, "cholesky", not_positive_definite)
+    assert np.allclose(c.leg_loads(np.array(stances)), references, rtol=1e-10, atol=1e-10)
 
 
 def _body_jac(m, d, body):  # type: ignore[no-untyped-def]
