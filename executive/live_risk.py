@@ -230,9 +230,11 @@ class LiveRiskMonitor:
             slice(adr, adr + 7) for adr in estimate.ids.object_qpos.values()
         ]  # free joints: 3 position + 4 quaternion
         self._feet: dict[int, tuple[World, frozenset[int]]] = {}  # id(world) -> its foot geoms
-        # id(world) -> the last exact CoM margin's contacts: (geom pairs, foot rows, their
-        # points, the CoM, the margin)
-        self._support: dict[int, tuple[bytes, NDArray[np.intp], FloatArray, tuple[float, float], float]] = {}
+        # id(world) -> the last exact CoM margin's contacts: (the world, geom pairs, foot rows,
+        # their points, the CoM, the margin)
+        self._support: dict[
+            int, tuple[World, bytes, NDArray[np.intp], FloatArray, tuple[float, float], float]
+        ] = {}
         self.com_bounded = 0  # CoM margins a certified lower bound answered
         self._lock = threading.RLock()
         self._tracks: dict[tuple[int, str | None, frozenset[tuple[str, str]]], _Track] = {}
@@ -429,8 +431,8 @@ class LiveRiskMonitor:
         pairs = contact.geom.tobytes() if data.ncon else b""
         cx, cy, _ = data.subtree_com[world.ids.base_body].tolist()
         ref = self._support.get(id(world))
-        if ref is not None and ref[0] == pairs:
-            _, take, points0, (cx0, cy0), margin0 = ref
+        if ref is not None and ref[0] is world and ref[1] == pairs:
+            _, _, take, points0, (cx0, cy0), margin0 = ref
             shift = contact.pos[take, :2]
             shift -= points0
             np.square(shift, out=shift)
@@ -443,7 +445,7 @@ class LiveRiskMonitor:
         margin = contact_support_margin(world, data, rows=rows)
         if margin is not None:
             take = np.array(rows, dtype=np.intp)  # fancy indexing takes an array faster than a list
-            self._support[id(world)] = (pairs, take, contact.pos[take, :2], (cx, cy), margin)
+            self._support[id(world)] = (world, pairs, take, contact.pos[take, :2], (cx, cy), margin)
         return margin
 
     def check(
