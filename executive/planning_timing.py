@@ -37,7 +37,6 @@ __all__ = [
     "build_trajectory",
     "interpolate_path",
     "min_jerk",
-    "normalise_quats",
     "path_parameter",
     "retime",
     "zmp_path",
@@ -74,36 +73,12 @@ class Trajectory:
 
     def sample(self, t: float) -> FloatArray:
         """qpos at time ``t`` (clamped to [0, duration]): linear between knots, quaternions normalised."""
-        t = min(max(float(t), 0.0), self.duration)
-        k = int(np.searchsorted(self.times, t, side="right")) - 1
-        k = min(max(k, 0), len(self.times) - 2)
-        t0, t1 = float(self.times[k]), float(self.times[k + 1])
-        alpha = (t - t0) / (t1 - t0)
-        q = (1.0 - alpha) * self.qpos[k] + alpha * self.qpos[k + 1]
-        normalise_quats(q, self.free_quat_adr)
-        return q
-
-    def knot_weights(self, times: ArrayLike) -> tuple[NDArray[np.intp], FloatArray]:
-        """Where each of ``times`` (clamped to [0, duration]) falls: the knot ``k`` before it and
-        the weight ``alpha`` of knot ``k + 1`` (:meth:`sample` is ``(1 - alpha) q_k + alpha q_k+1``)."""
-        t = np.clip(np.asarray(times, dtype=float), 0.0, self.duration)
-        k = np.clip(np.searchsorted(self.times, t, side="right") - 1, 0, len(self.times) - 2)
-        t0, t1 = self.times[k], self.times[k + 1]
-        return k, (t - t0) / (t1 - t0)
+        return self.sample_many(np.array([float(t)]))[0]
 
     def sample_many(self, times: ArrayLike) -> FloatArray:
-        """:meth:`sample` at each of ``times`` at once: (len(times), nq).
-
-        The same interpolation as :meth:`sample`, row for row (the quaternions' norm is taken
-        along the row, which may round differently from ``np.linalg.norm`` in the last bit).
-        """
-        k, weight = self.knot_weights(times)
-        alpha = weight[:, None]
-        q = (1.0 - alpha) * self.qpos[k] + alpha * self.qpos[k + 1]
-        for a in self.free_quat_adr:
-            quat = q[:, a : a + 4]
-            quat /= np.sqrt(np.einsum("ij,ij->i", quat, quat))[:, None]
-        return q
+        """:meth:`sample` at each of ``times`` at once: (len(times), nq)."""
+        t = np.clip(np.asarray(times, dtype=float), 0.0, self.duration)
+        return interpolate_path(self.qpos, self.times, t, self.free_quat_adr)
 
 
 class TimedJoints(NamedTuple):
@@ -120,11 +95,6 @@ class Frames(NamedTuple):
     hand_sites: dict[str, int]
     base_body: int
     quat_adr: tuple[int, ...]
-
-
-def normalise_quats(q: FloatArray, quat_adr: tuple[int, ...]) -> None:
-    for a in quat_adr:
-        q[a : a + 4] /= np.linalg.norm(q[a : a + 4])
 
 
 def min_jerk(u: FloatArray) -> FloatArray:

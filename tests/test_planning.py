@@ -438,11 +438,17 @@ def test_sample_and_top_down_quat(world: World, left_pick: dict[str, Trajectory]
     rot = np.empty(9)
     mujoco.mju_quat2Mat(rot, hand_top_down_quat((0.0, 2.0, 0.3)))
     assert np.allclose(rot.reshape(3, 3), [[-1, 0, 0], [0, 1, 0], [0, 0, -1]], atol=1e-12)
-    # Vectorised sampling (the behaviours' look-ahead) is sample() row for row, inside and beyond.
-    ts = np.concatenate([[-1.0], np.linspace(0.0, traj.duration, 97), [traj.duration + 1.0]])
-    many = traj.sample_many(ts)
-    assert many.shape == (len(ts), traj.qpos.shape[1])
-    assert np.abs(many - np.array([traj.sample(t) for t in ts])).max() < 1e-15
+    # Vectorised sampling (the behaviours' look-ahead): the knots at the knot times, the knots'
+    # mean (quaternions renormalised) halfway between, the ends beyond the ends.
+    mids = 0.5 * (traj.times[:-1] + traj.times[1:])
+    many = traj.sample_many(np.concatenate([traj.times, mids, [-1.0, traj.duration + 1.0]]))
+    k = len(traj.times)
+    assert np.allclose(many[:k], traj.qpos, rtol=0.0, atol=1e-12)
+    mean = 0.5 * (traj.qpos[:-1] + traj.qpos[1:])
+    for a in traj.free_quat_adr:
+        mean[:, a : a + 4] /= np.linalg.norm(mean[:, a : a + 4], axis=1, keepdims=True)
+    assert np.allclose(many[k:-2], mean, rtol=0.0, atol=1e-12)
+    assert np.allclose(many[-2:], traj.qpos[[0, -1]], rtol=0.0, atol=1e-12)
     assert np.allclose(np.linalg.norm(many[:, 3:7], axis=1), 1.0, atol=1e-15)
     with pytest.raises(PlanningError):
         # An iteration budget too small for the move: a PlanningError, never an approximation.
