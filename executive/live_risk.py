@@ -278,7 +278,7 @@ class LiveRiskMonitor:
     ) -> None:
         """Compute the knots in [lo, hi) not computed yet (caller holds the lock)."""
         for k in np.flatnonzero(np.isnan(track.dist[lo:hi])).tolist():
-            knot = self.collision.knot(track.qpos[lo + k], carried=carried, allow=allow)
+            knot = self.collision.knot(track.qpos[lo + k], carried=carried, allow=allow, near=False)
             track.dist[lo + k] = knot.distance
             track.names[lo + k] = (knot.robot_body_name, knot.env_body_name)
             self.knots_computed += 1
@@ -351,7 +351,7 @@ class LiveRiskMonitor:
             if bound >= at_least:
                 self.now_bounded += 1
                 return bound, ref.robot_body, ref.env_body
-        knot = self.collision.knot(now, carried=carried, allow=allow)
+        knot = self.collision.knot(now, carried=carried, allow=allow, near=False)  # the least only
         self.now_exact += 1
         if at_least is not None:
             robot, env = self._movers(carried)

@@ -288,6 +288,23 @@ def test_broad_phase_keeps_the_minimum_and_skips_most_pairs(world: World, cmodel
     assert float(np.min(fast.distances)) < world.scenario.risk.d_safety  # the reach comes close
 
 
+def test_the_least_distance_alone_is_the_same_for_fewer_pairs(world: World, cmodel: CollisionModel) -> None:
+    """knot(near=False), the guards' query: nearest bound first until none is below the best,
+    without the pass over every pair within the cutoff. Against every pair computed
+    (broad_phase=False): the same distance and pair along a reach that comes close."""
+    checked = {True: 0, False: 0}
+    for q in np.linspace(world.home_qpos(), _reach_pose(world), 40):
+        full = cmodel.knot(q, broad_phase=False)
+        for near in (True, False):
+            k = cmodel.knot(q, near=near)
+            assert k.distance == pytest.approx(full.distance, abs=1e-12)
+            assert (k.robot_geom, k.env_geom) == (full.robot_geom, full.env_geom)
+            checked[near] += k.pairs_checked
+        assert cmodel.knot(q, near=False).near == ()
+    print(f"pairs computed over 40 knots: {checked[True]} with the near pairs, {checked[False]} without")
+    assert checked[False] < 0.8 * checked[True]  # 461 of 683 when written
+
+
 def test_travel_bound_along_a_trajectory_changes_no_answer(world: World, cmodel: CollisionModel) -> None:
     """profile() skips pairs whose last coal distance less the travel since stays beyond the cutoff;
     every knot must still equal a fresh, independent query of that knot (same minimum, witness

@@ -558,12 +558,19 @@ class CollisionModel:
         carried: str | None = None,
         allow: Allow = (),
         broad_phase: bool = True,
+        near: bool = True,
     ) -> KnotDistance:
-        """Closest approach at configuration ``qpos`` (a full qpos of the model)."""
+        """Closest approach at configuration ``qpos`` (a full qpos of the model).
+
+        ``near=False``: the closest pair only (``near`` left empty): the pairs are visited
+        nearest broad-phase bound first until no bound is below the best distance, instead of
+        every pair within the cutoff first (which the collision probability needs). The same
+        least distance, for a fraction of the pairs.
+        """
         data = self._data
         data.qpos[:] = qpos
         mujoco.mj_kinematics(self.model, data)
-        return self._knot_from_data(data, self._layout(carried, allow), broad_phase)
+        return self._knot_from_data(data, self._layout(carried, allow), broad_phase, near=near)
 
     def profile(
         self, trajectory: TrajectoryLike, *, allow: Allow = (), broad_phase: bool = True
@@ -623,7 +630,13 @@ class CollisionModel:
         )
 
     def _knot_from_data(
-        self, data: mujoco.MjData, layout: _Layout, broad_phase: bool, travel: _TravelBound | None = None
+        self,
+        data: mujoco.MjData,
+        layout: _Layout,
+        broad_phase: bool,
+        travel: _TravelBound | None = None,
+        *,
+        near: bool = True,
     ) -> KnotDistance:
         n_pairs = layout.n_pairs
         if n_pairs == 0:
@@ -633,7 +646,8 @@ class CollisionModel:
                 bounds = travel.bounds()  # excluded pairs already at inf
             else:
                 bounds = np.where(layout.mask, self._lower_bounds(data, layout), np.inf)
-            first = bounds <= layout.cutoff[:, None]
+            # near: every pair within the cutoff first (all of them are wanted); else none first
+            first = bounds <= layout.cutoff[:, None] if near else np.zeros_like(layout.mask)
         else:
             bounds = np.where(layout.mask, -np.inf, np.inf)
             first = layout.mask
@@ -651,7 +665,7 @@ class CollisionModel:
         cutoff = layout.cutoff_list
         best, best_e, best_r = math.inf, -1, -1
         witness = (np.zeros(3), np.zeros(3), np.zeros(3))
-        near: list[NearPair] = []
+        near_pairs: list[NearPair] = []
         checked = 0
         pair_distance, env_body = self._pair_distance, layout.env_body
         record = travel.record if travel is not None else None
@@ -662,8 +676,8 @@ class CollisionModel:
             checked += 1
             if record is not None:
                 record(ei, ri, d)
-            if d <= cutoff[ei]:
-                near.append(NearPair(env_body[ei], env_ids[ei], robot_ids[ri], d, np.array(res.normal)))
+            if near and d <= cutoff[ei]:
+                near_pairs.append(NearPair(env_body[ei], env_ids[ei], robot_ids[ri], d, np.array(res.normal)))
             if d < best:
                 best, best_e, best_r = d, ei, ri
                 witness = (
@@ -707,7 +721,7 @@ class CollisionModel:
             risk=_risk(best, config.d_safety, config.collision.exponent),
             pairs_checked=checked,
             pairs_skipped=n_pairs - checked,
-            near=tuple(near),
+            near=tuple(near_pairs),
         )
 
     @property
