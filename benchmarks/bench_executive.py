@@ -1,6 +1,6 @@
 """Ticking overhead of the executive: its wall time vs raw ``mj_step`` time of the very same steps.
 
-    python benchmarks/bench_executive.py [SCENARIO] [--repeat N]
+    python benchmarks/bench_executive.py [SCENARIO] [--repeat N] [--control-dt S]
 
 Runs the mission with the :class:`executive.mission.Executive` (truth = estimate, auto
 approval), with live risk guards on and off, ``N`` times each, interleaved. During each
@@ -115,8 +115,8 @@ def _replay(
     return t1 - t0, t2 - t1, c2 - c1, data
 
 
-def run(scenario: str, guard: bool) -> Run:
-    ex = Executive(scenario, approval="auto", truth="exact", guard=guard)
+def run(scenario: str, guard: bool, control_dt: float = 0.02) -> Run:
+    ex = Executive(scenario, approval="auto", truth="exact", guard=guard, control_dt=control_dt)
     assert ex.truth is not None
     model, data = ex.truth.model, ex.truth.data
     state0 = np.empty(mujoco.mj_stateSize(model, STATE))
@@ -175,9 +175,15 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenario", nargs="?", default="book_transfer")
     parser.add_argument("--repeat", type=int, default=3, help="runs per setting (default 3)")
+    parser.add_argument(
+        "--control-dt", type=float, default=0.02, help="control period of a tick, s (default 0.02: 50 Hz)"
+    )
     args = parser.parse_args()
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
-    print(f"{args.scenario}: truth = estimate, approval auto; {os.cpu_count()} cpus, load average {load}")
+    print(
+        f"{args.scenario}: truth = estimate, approval auto, ticks every {args.control_dt * 1000:g} ms; "
+        f"{os.cpu_count()} cpus, load average {load}"
+    )
     print(
         f"{'guards':<7}{'exec ticks':>11}{'steps':>7}{'wall s':>8}{'raw s':>7}{'ratio':>7}{'cpu':>6}  |"
         f"{'run s':>7}{'raw s':>7}{'ratio':>7}  |{'tick mean':>10}{'max':>7}{'max run':>9} ms  same"
@@ -185,7 +191,7 @@ def main() -> None:
     runs: list[Run] = []
     for _ in range(max(1, args.repeat)):
         for guard in (True, False):
-            r = run(args.scenario, guard)
+            r = run(args.scenario, guard, args.control_dt)
             runs.append(r)
             print(
                 f"{'on' if guard else 'off':<7}{r.exec_ticks:>11}{r.exec_steps:>7}{r.exec_wall:>8.3f}"
