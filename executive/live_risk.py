@@ -30,10 +30,12 @@ reaches every look-ahead knot on the very next check (and forces an exact distan
 :meth:`LiveRiskMonitor.prepare` fills the memo for a whole trajectory ahead of time (the
 selector calls it in its planning thread), so a tick computes at most the measured
 configuration's distance.
-The CoM margin picks the foot contacts out in one pass (:func:`contact_support_margin`);
-a CoM clearly inside the support is measured without building the hull
-(:func:`interior_margin`, exact), anything else by the fall model's hull and margin
-(:mod:`executive.polygon`).
+The CoM margin is likewise a certified lower bound while the foot contacts are the same
+pairs as at the last exact margin (:meth:`LiveRiskMonitor.com_margin`), used only when it
+clears the limit. An exact margin picks the foot contacts out in one pass
+(:func:`contact_support_margin`); a CoM clearly inside the support is measured without
+building the hull (:func:`interior_margin`, exact), anything else by the fall model's hull
+and margin (:mod:`executive.polygon`). What each part costs: README, "What a tick costs".
 """
 
 from __future__ import annotations
