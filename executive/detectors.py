@@ -374,11 +374,6 @@ class FailureDetector:
         self._clr_best = math.nan  # recompute the squared thresholds at the next clearance
 
     @property
-    def carried(self) -> tuple[str, str] | None:
-        """(side, object) the phase last set says a hand carries, or None."""
-        return self._carried
-
-    @property
     def phase(self) -> dict[str, object]:
         """The phase last set (for logging)."""
         return {

@@ -572,27 +572,18 @@ class _Cores:
         self.count = len(pairs)
 
     def bounds(
-        self,
-        xpos: FloatArray,
-        xmat: FloatArray,
-        knots: NDArray[np.int_] | None,
-        pairs: NDArray[np.int_],
+        self, xpos: FloatArray, xmat: FloatArray, knots: NDArray[np.int_], pairs: NDArray[np.int_]
     ) -> FloatArray:
         """Lower bounds (m) on the distance of ``pairs``.
 
         ``xpos`` (K, ngeom, 3), ``xmat`` (K, ngeom, 9): the geoms' poses at K configurations,
-        ``knots`` the configuration of each pair; or ``knots`` None and ``xpos`` (ngeom, 3),
-        ``xmat`` (ngeom, 9) at one configuration.
+        ``knots`` the configuration of each pair.
         """
         both = np.concatenate([pairs, pairs + self.count])
         first, second = self.first[both], self.second[both]
-        if knots is None:
-            offset = xpos[second] - xpos[first]
-            axes = xmat[first]
-        else:
-            at = np.concatenate([knots, knots])
-            offset = xpos[at, second] - xpos[at, first]
-            axes = xmat[at, first]
+        at = np.concatenate([knots, knots])
+        offset = xpos[at, second] - xpos[at, first]
+        axes = xmat[at, first]
         # The offset in the first geom's frame (xmat is row-major: its columns are the axes).
         local = np.einsum("nij,ni->nj", axes.reshape(-1, 3, 3), offset)
         outside = np.maximum(np.abs(local) - self.half[both], 0.0)
