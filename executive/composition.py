@@ -31,6 +31,7 @@ from numpy.typing import NDArray
 
 from executive.errors import ExecutiveError
 from executive.planning import HandTarget, Planner, PlanningError, Trajectory
+from executive.planning_types import site_quat
 from executive.scenario_types import ALTERNATIVES, TransferTask
 from executive.world import World
 
@@ -115,9 +116,7 @@ def _home_targets(world: World) -> dict[str, HandTarget]:
     mujoco.mj_kinematics(world.model, data)
     out = {}
     for side, site in world.ids.hand_sites.items():
-        quat = np.zeros(4)
-        mujoco.mju_mat2Quat(quat, data.site_xmat[site])
-        out[side] = HandTarget(side, data.site_xpos[site].copy(), quat)
+        out[side] = HandTarget(side, data.site_xpos[site].copy(), site_quat(data, site))
     return out
 
 

@@ -77,6 +77,7 @@ from executive.planning_types import (
     hand_top_down_quat,
     se3,
     site_pose,
+    site_quat,
 )
 from executive.world import World, is_descendant
 
@@ -445,7 +446,7 @@ class Planner:
         cfg, data = self.config, self.configuration.data
         for side, goal in goals.items():
             site = self.world.ids.hand_sites[side]
-            position, quat = data.site_xpos[site], _site_quat(data, site)
+            position, quat = data.site_xpos[site], site_quat(data, site)
             delta = goal.wxyz_xyz[4:] - position
             turn = _rotation_log(quat, goal.wxyz_xyz[:4])  # hand to goal, in the hand frame
             dist, ang = float(np.linalg.norm(delta)), float(np.linalg.norm(turn))
@@ -560,7 +561,7 @@ class Planner:
         for side, goal in goals.items():
             site = self.world.ids.hand_sites[side]
             pos = float(np.linalg.norm(data.site_xpos[site] - goal.wxyz_xyz[4:]))
-            out[side] = (pos, _rotation_angle(goal.wxyz_xyz[:4], _site_quat(data, site)))
+            out[side] = (pos, _rotation_angle(goal.wxyz_xyz[:4], site_quat(data, site)))
         return out
 
     def _arrived(self, errors: dict[str, tuple[float, float]]) -> bool:
@@ -580,13 +581,6 @@ class Planner:
 
 
 # --- small helpers --------------------------------------------------------------------------
-
-
-def _site_quat(data: mujoco.MjData, site: int) -> FloatArray:
-    """A site's world orientation (w x y z), as mink's SO3.from_matrix makes it."""
-    quat = np.empty(4)
-    mujoco.mju_mat2Quat(quat, data.site_xmat[site])
-    return quat
 
 
 def _relative(a: FloatArray, b: FloatArray) -> FloatArray:

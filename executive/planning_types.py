@@ -27,6 +27,7 @@ __all__ = [
     "hand_top_down_quat",
     "se3",
     "site_pose",
+    "site_quat",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -241,6 +242,14 @@ def site_pose(data: mujoco.MjData, site: int) -> mink.SE3:
     )
 
 
+def site_quat(data: mujoco.MjData, site: int) -> FloatArray:
+    """A site's world orientation (w x y z) in the current kinematics, as mink's
+    SO3.from_matrix makes it (``mju_mat2Quat``)."""
+    quat = np.empty(4)
+    mujoco.mju_mat2Quat(quat, data.site_xmat[site])
+    return quat
+
+
 def body_pose(data: mujoco.MjData, body: int) -> mink.SE3:
     """World pose of a body in the current kinematics."""
     return mink.SE3.from_rotation_and_translation(
@@ -252,9 +261,7 @@ def attach_object(data: mujoco.MjData, relative: Relative) -> None:
     """Put a carried object's free joint at hand pose x relative pose (needs current kinematics)."""
     site, _body, qadr, rel = relative
     rel_quat, rel_pos = rel.wxyz_xyz[:4], rel.wxyz_xyz[4:]
-    site_quat = np.empty(4)
-    mujoco.mju_mat2Quat(site_quat, data.site_xmat[site])
     data.qpos[qadr : qadr + 3] = data.site_xpos[site] + data.site_xmat[site].reshape(3, 3) @ rel_pos
     quat = np.empty(4)
-    mujoco.mju_mulQuat(quat, site_quat, rel_quat)
+    mujoco.mju_mulQuat(quat, site_quat(data, site), rel_quat)
     data.qpos[qadr + 3 : qadr + 7] = quat / np.linalg.norm(quat)
