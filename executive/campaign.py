@@ -147,8 +147,8 @@ def vary_scene(
         shifts["obstacle_offsets"][body.name] = [float(dx), float(dy)]
     scene = dataclasses.replace(scenario.scene, objects=tuple(objects), obstacles=tuple(obstacles))
     uncertainty = scenario.uncertainty
-    low, high = variation.perception_scale
-    if (low, high) != (1.0, 1.0):
+    if variation.varies_perception:
+        low, high = variation.perception_scale
         factor = float(np.exp(rng.uniform(np.log(low), np.log(high))))
         uncertainty = dataclasses.replace(
             uncertainty,
@@ -772,8 +772,8 @@ def run_campaign(
         varied = not scenario.trials.scene_variation.is_zero()
         if varied:
             log("the scene varies from trial to trial (trials.scene_variation): each trial plans on its own")
-            low, high = scenario.trials.scene_variation.perception_scale
-            if (low, high) != (1.0, 1.0):
+            if scenario.trials.scene_variation.varies_perception:
+                low, high = scenario.trials.scene_variation.perception_scale
                 log(f"  and so does the perception: pose sigmas x {low:g} to x {high:g} (log-uniform)")
         else:
             log(f"planning {', '.join(names)} on the estimate")

@@ -228,8 +228,13 @@ class SceneVariation:
             self.object_position == 0.0
             and self.object_yaw_rad == 0.0
             and self.obstacle_position == 0.0
-            and self.perception_scale == (1.0, 1.0)
+            and not self.varies_perception
         )
+
+    @property
+    def varies_perception(self) -> bool:
+        """Whether trials draw their own perception factor (``perception_scale`` is not (1, 1))."""
+        return self.perception_scale != (1.0, 1.0)
 
 
 @dataclass(frozen=True)
