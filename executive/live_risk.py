@@ -97,6 +97,7 @@ class _Track:
     def __init__(self, qpos: FloatArray) -> None:
         self.qpos = qpos
         self.dist = np.full(len(qpos), np.nan)
+        self.missing = len(qpos)  # knots whose distance is not computed yet (NaN in dist)
         self.names: list[tuple[str, str]] = [("", "")] * len(qpos)
         # The last look-ahead window (lo, hi) and its least knot: a window's knots, once
         # computed, never change in this track, so the next ticks inside the same knot
@@ -279,10 +280,13 @@ class LiveRiskMonitor:
         self, track: _Track, lo: int, hi: int, carried: str | None, allow: frozenset[tuple[str, str]]
     ) -> None:
         """Compute the knots in [lo, hi) not computed yet (caller holds the lock)."""
+        if not track.missing:  # all computed (prepare filled the track ahead)
+            return
         for k in np.flatnonzero(np.isnan(track.dist[lo:hi])).tolist():
             knot = self.collision.knot(track.qpos[lo + k], carried=carried, allow=allow, near=False)
             track.dist[lo + k] = knot.distance
             track.names[lo + k] = (knot.robot_body_name, knot.env_body_name)
+            track.missing -= 1
             self.knots_computed += 1
 
     def prepare(
