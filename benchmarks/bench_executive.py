@@ -53,7 +53,7 @@ import executive.detectors as detectors
 import executive.execution as execution
 import executive.live_risk as live_risk
 from behaviours.move_hand import MoveHand
-from executive.mission import Executive
+from executive.mission import Executive, freeze_startup_heap
 
 STATE = mujoco.mjtState.mjSTATE_INTEGRATION
 
@@ -364,6 +364,7 @@ def main() -> None:
         help="one more instrumented run per setting: where a tick's time goes",
     )
     args = parser.parse_args()
+    freeze_startup_heap()  # as `executive run` does: the libraries out of the collector's reach
     load = ", ".join(f"{v:.1f}" for v in os.getloadavg())
     print(
         f"{args.scenario}: truth = estimate, approval auto, ticks every {args.control_dt * 1000:g} ms; "

@@ -242,3 +242,34 @@ def test_the_tick_that_ends_planning_only_swaps_in_subtrees_built_by_the_worker(
     assert selector.phase == "executing" and selector.chosen == selector.ranking[0].name
     assert monitor.knots_computed == prepared
     executive.stop("test over")
+
+
+_FREEZE_PROBE = """
+import gc, time
+import executive.cli, executive.mission as mission
+ex = mission.Executive("book_transfer", approval="auto", truth="exact")
+tracked = len(gc.get_objects())
+t0 = time.perf_counter(); gc.collect(); before = time.perf_counter() - t0
+frozen = mission.freeze_startup_heap()
+again = mission.freeze_startup_heap()
+t0 = time.perf_counter(); gc.collect(); after = time.perf_counter() - t0
+print(tracked, frozen, again, len(gc.get_objects()), before, after)
+"""
+
+
+def test_freeze_startup_heap_takes_the_libraries_and_the_executive_out_of_full_collections() -> None:
+    # In a fresh interpreter: freezing is for the whole process (the test process keeps its gc).
+    proc = subprocess.run(
+        [sys.executable, "-c", _FREEZE_PROBE], capture_output=True, text=True, env=ENV, timeout=120
+    )
+    assert proc.returncode == 0, proc.stderr
+    tracked, frozen, again, left = (int(v) for v in proc.stdout.split()[:4])
+    before, after = (float(v) for v in proc.stdout.split()[4:])
+    print(
+        f"{tracked} objects tracked, {frozen} frozen, {left} left; "
+        f"full collection {before * 1e3:.1f} -> {after * 1e3:.2f} ms"
+    )
+    assert tracked > 50_000  # numpy, MuJoCo, scipy, mink, coal, py_trees and the executive
+    assert frozen >= 0.95 * tracked and again == frozen  # once per process
+    assert left < 0.01 * tracked
+    assert after < 0.1 * before  # a full collection walks what is left only
