@@ -58,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     executive = Executive(
         scenario, approval=CallbackChannel(approver, name="embed-example"), truth="exact", control_dt=PERIOD_S
     )
-    freeze_startup_heap()  # built once: keep the 30-60 ms full garbage collections out of the loop
+    freeze_startup_heap()  # built once: keep the 27-57 ms full garbage collections out of the loop
     seen = 0
     longest = 0.0
     start = time.perf_counter()

@@ -15,7 +15,7 @@ waiting for an answer, if any), ``log`` (the :class:`executive.audit.AuditLog`) 
 
 A host that ticks in real time should call :func:`freeze_startup_heap` once it has built
 the executive (``executive run`` does): CPython's full garbage collection otherwise
-stops every thread for 30-60 ms now and then, in the middle of a motion.
+stops every thread for 27-57 ms now and then, in the middle of a motion.
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ def freeze_startup_heap() -> int:
 
     A full (generation 2) collection walks every tracked object. Once numpy, MuJoCo,
     scipy, mink, coal, py_trees and matplotlib are imported that is about 120 000 objects
-    and one collection stops every thread for 30-60 ms (measured on the 2-core machine);
+    and one collection stops every thread for 27-57 ms (measured on the 2-core machine);
     CPython starts one when the long-lived objects have grown by a quarter, so about once
     in a run, wherever the tick happens to be. After ``gc.collect(); gc.freeze()`` the
     libraries, the worlds and the tree are in the permanent generation and later full
