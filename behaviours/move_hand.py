@@ -83,8 +83,7 @@ class MoveHand(RobotBehaviour):
 
     def update(self) -> Status:
         robot = self._robot
-        if robot.failure is not None:
-            self.feedback_message = robot.failure.detail  # as failed_by_detector()
+        if self.failed_by_detector(robot):
             return Status.FAILURE
         t = robot.time - self._t0
         q, qvel = self._targets(t, robot.control_dt)

@@ -42,9 +42,11 @@ class RobotBehaviour(py_trees.behaviour.Behaviour):
     def robot(self) -> Any:
         return self.bb.robot
 
-    def failed_by_detector(self) -> bool:
-        """True (with the feedback message set) when the physics detectors flagged a failure."""
-        failure = self.robot.failure
+    def failed_by_detector(self, robot: Any = None) -> bool:
+        """True (with the feedback message set) when the physics detectors flagged a failure.
+
+        ``robot``: the robot if the caller holds it already (saves a blackboard read)."""
+        failure = (self.robot if robot is None else robot).failure
         if failure is None:
             return False
         self.feedback_message = failure.detail  # already "<mode>: ..."
