@@ -337,10 +337,12 @@ class LiveRiskMonitor:
         """
         key = (carried, allow)
         ref = self._now.get(key)
+        model, data = self.collision.model, self._kinematics
+        posed = False  # whether data holds the kinematics of `now`
         if at_least is not None and ref is not None:
-            model, data = self.collision.model, self._kinematics
             data.qpos[:] = now
             mujoco.mj_kinematics(model, data)
+            posed = True
             # Row norms as sqrt((x * x) @ 1): a product with a ones vector is cheaper than a
             # reduction along rows of 3 or 9 (one rounding more than np.linalg.norm: covered by
             # _BOUND_SLACK).
@@ -362,9 +364,9 @@ class LiveRiskMonitor:
         if at_least is not None:
             robot, env = self._movers(carried)
             geoms = np.concatenate([robot, env])
-            data = self._kinematics
-            data.qpos[:] = now
-            mujoco.mj_kinematics(self.collision.model, data)
+            if not posed:  # the bound above has posed them already
+                data.qpos[:] = now
+                mujoco.mj_kinematics(model, data)
             self._now[key] = _NowReference(
                 distance=float(knot.distance),
                 robot_body=knot.robot_body_name,
@@ -373,7 +375,7 @@ class LiveRiskMonitor:
                 sides=np.array([0, len(robot)] if len(env) else [0], dtype=np.intp),
                 pos=data.geom_xpos[geoms].copy(),
                 rot=data.geom_xmat[geoms].copy(),
-                radius=self.collision.model.geom_rbound[geoms] * _ROTATION_NORM,
+                radius=model.geom_rbound[geoms] * _ROTATION_NORM,
             )
         return float(knot.distance), knot.robot_body_name, knot.env_body_name
 
