@@ -203,7 +203,7 @@ def run_trial(
         "failure": None,
         "placement_error_m": None,
         "sim_time_s": 0.0,
-        "predicted": prediction.risk,
+        "predicted": None if prediction.risk is None else {**prediction.risk, "value": prediction.value},
         "scene": shifts,
         "truth": _perturbation_json(asdict(perturbation)),
     }
@@ -476,7 +476,10 @@ def summarise(
         if mine:
             keys = ("collision", "fall", "grasp", "combined", "weighted_sum", "expected_loss")
             predicted = {k: float(np.mean([r["predicted"][k] for r in mine])) for k in keys}
-            predicted["value"] = predicted.get(ordering)
+            # the number the selector ranked by (fused with the rollouts when they ran)
+            predicted["value"] = float(
+                np.mean([r["predicted"].get("value", r["predicted"][ordering]) for r in mine])
+            )
         per_alt.append(
             {
                 "name": name,

@@ -28,6 +28,7 @@ from executive.scenario_types import (
     GuardConfig,
     RiskConfig,
     RobotSpec,
+    RolloutConfig,
     Scenario,
     SceneConfig,
     SceneVariation,
@@ -271,8 +272,30 @@ def _risk(node: Node) -> RiskConfig:
             "ordering": ("ordering", lambda n: n.choice(ORDERINGS)),
             "threshold": ("threshold", Node.non_negative),
             "guard": ("guard", _guard),
+            "rollouts": ("rollouts", _rollouts),
         },
     )
+
+
+def _rollouts(node: Node) -> RolloutConfig:
+    config = read_fields(
+        node,
+        RolloutConfig,
+        {
+            "count": ("count", lambda n: n.integer(ge=0)),
+            "min_count": ("min_count", lambda n: n.integer(ge=1)),
+            "batch": ("batch", lambda n: n.integer(ge=1)),
+            "budget_s": ("budget_s", Node.positive),
+            "confidence": ("confidence", lambda n: n.number(gt=0.5, le=0.999)),
+            "prior_weight": ("prior_weight", Node.non_negative),
+            "jobs": ("jobs", lambda n: n.integer(ge=1)),
+        },
+    )
+    if config.count and config.min_count > config.count:
+        node.get("min_count" if node.has("min_count") else "count").fail(
+            f"min_count ({config.min_count}) is more than count ({config.count})"
+        )
+    return config
 
 
 def _guard(node: Node) -> GuardConfig:

@@ -167,6 +167,25 @@ class GuardConfig:
 
 
 @dataclass(frozen=True)
+class RolloutConfig:
+    """Monte Carlo risk in physics before ranking (``risk.rollouts``; executive/rollouts.py).
+
+    Each feasible alternative is executed on truths sampled from the uncertainty, in rounds
+    of ``batch`` per alternative, until the sequential stopping rule says the choice is clear,
+    ``count`` rollouts per alternative are done, or ``budget_s`` of wall time is spent. The
+    counts are fused with the analytic prediction (a Beta prior of weight ``prior_weight``).
+    """
+
+    count: int = 0  # most rollouts per alternative; 0: off (the dry runs still run)
+    min_count: int = 8  # rollouts per alternative before the stopping rule may stop
+    batch: int = 4  # rollouts per alternative per round
+    budget_s: float = 60.0  # s of wall time for all rollouts of one decision
+    confidence: float = 0.95  # level of the intervals the stopping rule compares
+    prior_weight: float = 10.0  # pseudo-trials the analytic prediction counts for
+    jobs: int = 2  # worker processes
+
+
+@dataclass(frozen=True)
 class RiskConfig:
     """Everything the risk models and the selector take from the scenario."""
 
@@ -179,6 +198,7 @@ class RiskConfig:
     ordering: Literal["weighted_sum", "probability", "expected_loss"] = "expected_loss"
     threshold: float = 0.3
     guard: GuardConfig = field(default_factory=GuardConfig)
+    rollouts: RolloutConfig = field(default_factory=RolloutConfig)
 
 
 @dataclass(frozen=True)
