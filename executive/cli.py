@@ -237,6 +237,34 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _cmd_fidelity(args: argparse.Namespace) -> int:
+    from executive.fidelity import run_fidelity, table_text
+
+    scenario = _load(args.scenario)
+    result = run_fidelity(
+        scenario,
+        variants=args.variants,
+        trials=args.trials,
+        jobs=args.jobs,
+        out=args.out,
+        seed=args.seed,
+        rollouts=args.rollouts,
+        resume=args.resume,
+        stream=sys.stdout,
+    )
+    print(table_text(result.summary))
+    print(f"suite folder {result.folder} (summary.json, table.md, reliability.png, variant-KK.yaml and -KK/)")
+    if result.interrupted or not result.summary["complete"]:
+        print(
+            f"executive fidelity: interrupted. Complete it with: executive fidelity {args.scenario} "
+            f"--variants {args.variants} --trials {args.trials} --seed {result.summary['seed']} "
+            f"--rollouts {args.rollouts} --resume --out {result.folder}",
+            file=sys.stderr,
+        )
+        return EXIT_FAILED
+    return EXIT_OK
+
+
 def _positive(text: str) -> int:
     try:
         value = int(text)
@@ -321,6 +349,21 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--task", type=int, default=0, help="index of the mission's task (default 0)")
     p.add_argument("--alternatives", help="comma-separated subset of the task's alternatives (default: all)")
     p.set_defaults(func=_cmd_campaign)
+
+    p = sub.add_parser(
+        "fidelity",
+        help="variation suite: K seeded variants of the scene, a campaign on each; does the risk "
+        "ranking hold (predicted vs observed, regret of the per-trial choice)?",
+    )
+    p.add_argument("scenario", help=scenario_help)
+    p.add_argument("--variants", type=int, default=10, help="number of scene variants K (default 10)")
+    p.add_argument("--trials", type=int, default=10, help="trials per alternative and variant (default 10)")
+    p.add_argument("--jobs", type=int, default=1, help="parallel worker processes per campaign (default 1)")
+    p.add_argument("--out", metavar="DIR", help="suite folder (default runs/<timestamp>-<scenario>-fidelity)")
+    p.add_argument("--seed", type=int, default=None, help="seed of the variants (default: trials.seed)")
+    p.add_argument("--rollouts", type=int, default=0, help="risk.rollouts.count of every variant (0: off)")
+    p.add_argument("--resume", action="store_true", help="complete the suite in --out DIR")
+    p.set_defaults(func=_cmd_fidelity)
     return parser
 
 
