@@ -15,10 +15,15 @@ Failure modes
     the data after a bad qpos/qvel/qacc (its auto-reset), so the warning counter is
     what still shows it afterwards.
 ``fall``
-    The base (pelvis) more than ``pelvis_drop`` below its height when the detector
-    was made; the torso's z axis more than ``trunk_tilt_deg`` from vertical; or a
-    robot geom other than the soles touching the floor (contact normal force at
-    least ``collision_force``).
+    The robot left its safe posture (``profile.safe_posture``, :mod:`executive.posture`, the
+    one the planner keeps every plan inside) by more than the posture's tolerance: the base
+    (pelvis) more than ``max_pelvis_drop + pelvis_tolerance`` below its standing height
+    (the keyframe's), or the torso's z axis more than ``max_trunk_tilt_deg +
+    tilt_tolerance_deg`` from vertical (``DetectorThresholds.pelvis_drop`` and
+    ``trunk_tilt_deg`` override either); or a robot geom other than the soles touching the
+    floor (contact normal force at least ``collision_force``). A planned squat within the
+    posture is not a fall; a pelvis that sinks below the deepest plan by more than the
+    tolerance is.
 ``drop``
     A carried object farther than ``hold_distance`` from the holding hand's site
     (the distance from the site to the object's surface: 0 while the site is inside
@@ -93,6 +98,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.errors import ExecutiveError
+from executive.posture import standing_pelvis_height
 from executive.world import World
 
 __all__ = [
@@ -140,12 +146,12 @@ class Failure:
 class DetectorThresholds:
     """When an observation counts as a failure; every default with its reason."""
 
-    # m below the start height => fall. The stand keeps the pelvis within 2 cm; a planned
-    # squat is not part of any behaviour; 15 cm is a collapse, not a sag.
-    pelvis_drop: float = 0.15
-    # deg of the torso's z axis from vertical => fall. Reaching leans a few degrees; past
-    # 30 deg the CoM of a 1.8 m humanoid is far outside its feet.
-    trunk_tilt_deg: float = 30.0
+    # m below the standing height => fall. None: the robot's safe posture's limit plus its
+    # tolerance (SafePosture.fall_pelvis_drop): the planner plans no deeper than the limit.
+    pelvis_drop: float | None = None
+    # deg of the torso's z axis from vertical => fall. None: the safe posture's
+    # (SafePosture.fall_tilt_deg).
+    trunk_tilt_deg: float | None = None
     # N; contacts below this are grazes, ignored (kept as the closest call). 1 N is about
     # the weight of 0.1 kg: any deliberate push exceeds it, solver noise of a touch does not.
     collision_force: float = 1.0
@@ -210,8 +216,9 @@ class ClosestCall:
 class FailureDetector:
     """Watches one execution in a truth world; call :meth:`check` after every ``mj_step``.
 
-    Make one detector per execution, with the world in its start state: the start
-    pelvis height and the MuJoCo warning counters are taken at construction.
+    Make one detector per execution, with the world in its start state: the MuJoCo warning
+    counters are taken at construction (and the start pelvis height, ``start_height``, for
+    the report); the fall limits are the robot's safe posture's unless ``thresholds`` sets them.
     ``distance_stride``: compute the closest clearance every this many checks (0: never).
     """
 
@@ -235,8 +242,14 @@ class FailureDetector:
         self._max_qvel_sq = self.thresholds.max_qvel**2
         self._base, self._torso = ids.base_body, ids.torso_body
         self.start_height = float(d.xpos[ids.base_body][2])
-        self._min_height = self.start_height - th.pelvis_drop
-        self._min_cos_tilt = math.cos(math.radians(th.trunk_tilt_deg))
+        posture = world.profile.safe_posture
+        #: m: the pelvis height of the standing keyframe, which the pelvis limit is measured from.
+        self.standing_height = standing_pelvis_height(m, ids.keyframe, ids.base_body)
+        #: m below standing and deg from vertical beyond which the robot has fallen.
+        self.pelvis_drop = th.pelvis_drop if th.pelvis_drop is not None else posture.fall_pelvis_drop
+        self.trunk_tilt_deg = th.trunk_tilt_deg if th.trunk_tilt_deg is not None else posture.fall_tilt_deg
+        self._min_height = self.standing_height - self.pelvis_drop
+        self._min_cos_tilt = math.cos(math.radians(self.trunk_tilt_deg))
         self._force = np.zeros(6)
         self._stride = max(0, int(distance_stride))
         self._n_checks = 0
@@ -506,11 +519,10 @@ class FailureDetector:
         m = self._m
         tilt = math.degrees(math.acos(max(-1.0, min(1.0, cos_tilt))))
         base, torso = str(m.body(self._base).name), str(m.body(self._torso).name)
-        th = self.thresholds
         state = (
-            f"{base} at {z:.3f} m ({self.start_height - z:.3f} m below its start {self.start_height:.3f} m, "
-            f"limit {th.pelvis_drop:.3f} m), {torso} tilted {tilt:.1f} deg from vertical "
-            f"(limit {th.trunk_tilt_deg:.1f} deg)"
+            f"{base} at {z:.3f} m ({self.standing_height - z:.3f} m below standing "
+            f"{self.standing_height:.3f} m, limit {self.pelvis_drop:.3f} m), {torso} tilted {tilt:.1f} deg "
+            f"from vertical (limit {self.trunk_tilt_deg:.1f} deg)"
         )
         if z < self._min_height:
             return Failure("fall", f"fall: {base} dropped: {state} at t={t:.3f} s", t, (base,))

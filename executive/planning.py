@@ -58,6 +58,7 @@ from numpy.typing import NDArray
 from executive.planning_limits import (
     GeomPairCollisionLimit,
     JointBounds,
+    PelvisHeightLimit,
     SupportPolygon,
     SupportPolygonLimit,
     TiltLimit,
@@ -79,6 +80,7 @@ from executive.planning_types import (
     site_pose,
     site_quat,
 )
+from executive.posture import standing_pelvis_height
 from executive.world import World, is_descendant
 
 __all__ = [
@@ -94,6 +96,9 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
+#: m the pelvis limit of the IK's QP keeps above the safe posture's floor.
+_PELVIS_QP_MARGIN = 0.005
+
 
 class Planner:
     """Whole-body differential-IK planner on a world's model (build once, call :meth:`move` often)."""
@@ -105,6 +110,7 @@ class Planner:
         ids = world.ids
         self.sides: tuple[str, ...] = tuple(sorted(ids.hand_sites))
         self.configuration = mink.Configuration(model)
+        self._path_lowest = math.inf  # the lowest pelvis height of the last IK path (m)
         self.last_stats: PlanStats | None = None
 
         jnt = mujoco.mjtJoint
@@ -172,7 +178,16 @@ class Planner:
             raise PlanningInputError(f"the robot's base must be body 1 of the model, not {ids.base_body}")
         # The joint range and velocity limits as bounds of the step's QP on the unfrozen dofs.
         self.joints = JointBounds(model, velocity, frozen)
-        self.tilt = TiltLimit(model, ids.torso_body, float(np.radians(cfg.max_torso_tilt_deg)))
+        # The safe posture (executive.posture): the torso's tilt, and the pelvis no lower than its
+        # limit below standing (a little higher in the QP, as for the balance, so that the
+        # second-order drift of a step and the knots between steps stay inside it).
+        self.posture_limits = world.profile.safe_posture
+        tilt = min(cfg.max_torso_tilt_deg, self.posture_limits.max_trunk_tilt_deg)
+        self.tilt = TiltLimit(model, ids.torso_body, float(np.radians(tilt)))
+        self.standing_height = standing_pelvis_height(model, ids.keyframe, ids.base_body)
+        self.pelvis_floor = self.standing_height - self.posture_limits.max_pelvis_drop
+        self.pelvis = PelvisHeightLimit(model, ids.base_body, self.pelvis_floor + _PELVIS_QP_MARGIN)
+        self.base_z_adr = int(model.jnt_qposadr[model.body_jntadr[ids.base_body]]) + 2
         self.foot_geoms = [g for s in sorted(ids.foot_geoms) for g in ids.foot_geoms[s]]
         self._pairs: dict[tuple[tuple[str, str] | None, tuple[str, ...]], list[tuple[int, int]]] = {}
         # The collision limit of each (carried, allow_contact), with its pairs' required clearance:
@@ -269,11 +284,71 @@ class Planner:
         move is a short whole-body move), unless ``rest``: a return to the rest pose, where
         the legs and waist are pulled towards the keyframe too.
 
+        The pelvis stays inside the robot's safe posture (``profile.safe_posture``): a target
+        the hands reach only with the pelvis lower than that is refused with the depth it
+        would need (the move is planned again without the pelvis limit to measure it).
+
         Raises PlanningError when a hand is still outside tolerance after the
         iteration budget (or when progress stalls), naming the side and the
-        remaining position and angle errors.
+        remaining position and angle errors, or the safe posture's limit that holds it back.
         """
+        try:
+            return self._move(q_start, targets, name, carried, allow_contact, rest, posture=True)
+        except PlanningError as exc:
+            if self._path_lowest > self.pelvis_floor + 2.0 * _PELVIS_QP_MARGIN:
+                raise  # the pelvis limit did not hold the hands back
+            self._posture_failure(exc, q_start, targets, name, carried, allow_contact, rest)
+            raise
+
+    def _posture_failure(
+        self,
+        exc: PlanningError,
+        q_start: FloatArray,
+        targets: Sequence[HandTarget],
+        name: str,
+        carried: tuple[str, str] | None,
+        allow_contact: Sequence[str],
+        rest: bool,
+    ) -> None:
+        """Plan a failed move again without the pelvis limit; raise the posture's named reason
+        when that reaches the targets with the pelvis below the safe posture (else return)."""
+        try:
+            free = self._move(q_start, targets, name, carried, allow_contact, rest, posture=False)
+        except PlanningError:
+            return
+        needed = self.standing_height - float(np.min(free.qpos[:, self.base_z_adr]))
+        if needed <= self.posture_limits.max_pelvis_drop:
+            return
+        held = (
+            f"the {exc.side} hand stops {exc.position_error * 1000:.0f} mm short"
+            if exc.side is not None
+            else str(exc)
+        )
+        raise PlanningError(
+            name,
+            exc.side,
+            exc.position_error,
+            exc.angle_error,
+            exc.iterations,
+            f"motion '{name}': reaching the target {self.posture_limits.describe_drop(needed)} "
+            f"(robot '{self.world.profile.name}', safe_posture.max_pelvis_drop); with the pelvis "
+            f"held there, {held}",
+        ) from exc
+
+    def _move(
+        self,
+        q_start: FloatArray,
+        targets: Sequence[HandTarget],
+        name: str,
+        carried: tuple[str, str] | None,
+        allow_contact: Sequence[str],
+        rest: bool,
+        *,
+        posture: bool,
+    ) -> Trajectory:
+        """:meth:`move`, with the safe posture's pelvis limit in the QP if ``posture``."""
         started = time.perf_counter()
+        self._path_lowest = math.inf
         cfg, model, ids = self.config, self.model, self.world.ids
         self._check_request(q_start, targets, carried)
         conf = self.configuration
@@ -339,6 +414,8 @@ class Planner:
         # Keep a small extra margin in the QP so that interpolated knots stay inside the checked one.
         balance = SupportPolygonLimit(model, ids.base_body, polygon, cfg.support_margin + 0.002)
         limits: list[mink.Limit] = [self.tilt, balance, collisions]
+        if posture:
+            limits.insert(1, self.pelvis)
         constraints: list[mink.Task] = list(self.feet)
 
         clearance0 = collisions.distances(conf.data)
@@ -380,6 +457,7 @@ class Planner:
             self._step(velocity, relative, collisions, floor)
             iterations += 1
             path.append(conf.q)
+            self._path_lowest = min(self._path_lowest, float(conf.q[self.base_z_adr]))
             errors = self._errors(active)
             for side, (pos, _ang) in errors.items():
                 # A via point is passed, not reached: move on once the hand is near it.
@@ -404,10 +482,28 @@ class Planner:
             collisions,
             np.minimum(clearance0, required),
         )
+        if posture:
+            self._check_posture(trajectory)
         self.last_stats = PlanStats(
             name, iterations, ik_time, time.perf_counter() - started, len(trajectory.times)
         )
         return trajectory
+
+    def _check_posture(self, trajectory: Trajectory) -> None:
+        """Every knot's pelvis within the safe posture (the QP's limit is first order)."""
+        heights = trajectory.qpos[:, self.base_z_adr]
+        k = int(np.argmin(heights))
+        if heights[k] >= self.pelvis_floor:
+            return
+        reason = self.posture_limits.describe_drop(self.standing_height - float(heights[k]))
+        raise PlanningError(
+            trajectory.name,
+            None,
+            0.0,
+            0.0,
+            0,
+            f"motion '{trajectory.name}': the timed path {reason} at t = {trajectory.times[k]:.2f} s",
+        )
 
     def _routes(
         self, targets: Sequence[HandTarget], carried: tuple[str, str] | None, allow_contact: Sequence[str]

@@ -9,6 +9,8 @@ Both are ``mink.Limit`` subclasses, so ``mink.solve_ik`` (or the planner's
 * :class:`SupportPolygonLimit` keeps the whole-robot CoM inside that polygon shrunk
   by a margin, to first order: ``A (c + J_c dq) <= b`` (a velocity-damper form
   like mink's ``ConfigurationLimit``).
+* :class:`TiltLimit` and :class:`PelvisHeightLimit` keep the planned posture inside the
+  robot's safe posture (:mod:`executive.posture`): the torso's tilt and the pelvis height.
 * :class:`GeomPairCollisionLimit` is mink's ``CollisionAvoidanceLimit`` on explicit,
   pre-filtered geom pairs, with one addition: a geom may be *attached* to another
   body (a carried object moves with the hand), so its Jacobian is taken on that
@@ -32,6 +34,7 @@ __all__ = [
     "ConfigurationLimit",
     "GeomPairCollisionLimit",
     "JointBounds",
+    "PelvisHeightLimit",
     "SupportPolygon",
     "SupportPolygonLimit",
     "TiltLimit",
@@ -147,6 +150,40 @@ class TiltLimit(mink.Limit):
         axis = np.array([mat[5], -mat[2], 0.0])  # z x (0, 0, 1)
         G = -(axis @ self._jac)[None, :]
         h = np.array([self.gain * (float(mat[8]) - self.min_cos)])
+        return mink.Constraint(G=G, h=h)
+
+
+class PelvisHeightLimit(mink.Limit):
+    """A body's origin (the pelvis) stays at least at ``min_height`` (m) above the world's z = 0.
+
+    With ``z`` the body's height and ``J_z`` the z row of its translational Jacobian, the row is
+    ``-J_z dq <= gain (z - min_height)`` (the velocity-damper form of
+    :class:`SupportPolygonLimit`): the body approaches its floor at most ``gain`` of the way
+    per step, never crossing it to first order. Below the floor (second-order drift of the
+    steps, or a start below it) the bound is ``-min(gain (min_height - z), recovery)``: it rises
+    back by at most ``recovery`` (m) per step, as :class:`GeomPairCollisionLimit`'s pairs. The
+    safe posture's pelvis limit
+    (:class:`executive.posture.SafePosture`).
+    """
+
+    def __init__(
+        self, model: mujoco.MjModel, body: int, min_height: float, gain: float = 0.5, recovery: float = 0.002
+    ) -> None:
+        self.model = model
+        self.body = body
+        self.min_height = float(min_height)
+        self.recovery = recovery
+        self.gain = gain
+        self._jac = np.empty((3, model.nv))
+
+    def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
+        del dt  # a position limit, like mink's ConfigurationLimit
+        data = configuration.data
+        mujoco.mj_jacBody(self.model, data, self._jac, None, self.body)
+        height = float(data.xpos[self.body][2])
+        G = -self._jac[2:3]
+        gap = height - self.min_height
+        h = np.array([self.gain * gap if gap >= 0.0 else -min(-self.gain * gap, self.recovery)])
         return mink.Constraint(G=G, h=h)
 
 

@@ -299,10 +299,16 @@ def test_assess_fall_on_a_forward_lean(world: World) -> None:
     assert np.all(np.diff(prob[order]) <= 1e-12)
     # The CoM is recomputed from qpos: it agrees with the trajectory's own com_path.
     assert float(report.details["com_path_mismatch"]) < 1e-9
-    # Persistent bias, one-way motion: the trajectory probability is the worst knot's (nearly).
+    # Persistent bias, one-way motion: the support part of the probability is the worst knot's
+    # (nearly).
     lo, hi = report.probability_bounds
     assert lo <= report.probability <= hi
-    assert report.probability == pytest.approx(float(np.max(prob)), abs=1e-4)
+    assert report.details["probability_support"] == pytest.approx(float(np.max(prob)), abs=1e-4)
+    # The waist pitch of 0.6 rad tilts the torso past the safe posture's fall tilt (the detector's
+    # limit): that is a fall whatever the CoM does.
+    tilt = float(np.degrees(0.6))
+    assert report.details["max_trunk_tilt_deg"] == pytest.approx(tilt, abs=0.5)
+    assert tilt > world.profile.safe_posture.fall_tilt_deg and report.probability == 1.0
     assert report.details["min_margin"] == pytest.approx(float(margin[-1]))
     assert report.seed_score == pytest.approx(float(np.max(report.traces["seed_risk"])))
     # A moving CoM's capture point leads it: smaller capture margin mid-motion.
@@ -319,7 +325,7 @@ def test_assess_fall_without_uncertainty_uses_the_circle(world: World) -> None:
     expected = [seed_fall_risk(m, 0.05, 1.0) for m in margin]
     np.testing.assert_allclose(report.traces["seed_risk"], expected)
     inside = bool(np.all(margin > 0.0))
-    assert report.probability == (0.0 if inside else 1.0)
+    assert report.details["probability_support"] == (0.0 if inside else 1.0)
 
 
 def test_convex_hull_examples() -> None:

@@ -25,6 +25,14 @@ one edge), S is the worst knot's shifted polygon and the probability is the wors
 in general it is at least that. Bounds: lower = max over knots of the exact per-knot
 probability (``details["probability_worst_knot"]``), upper = min(1, Boole sum over the
 edges of S).
+
+Posture. The same persistent-bias model holds for the vertical: the pelvis, planned at its
+lowest height z_min, ends e_z ~ N(0, sigma^2) off it (sigma the CoM uncertainty, taken
+isotropic, so e_z is independent of the horizontal error), and the fall detector calls a
+pelvis below the safe posture's floor (standing less ``SafePosture.fall_pelvis_drop``) a
+fall: P_pelvis = Phi((floor - z_min) / sigma). A planned torso tilt beyond
+``SafePosture.fall_tilt_deg`` is a fall for sure. The three failures are independent:
+P(fall) = 1 - (1 - P_support)(1 - P_pelvis)(1 - P_tilt), and the same for both bounds.
 """
 
 from __future__ import annotations
@@ -45,6 +53,7 @@ from executive.polygon import (
     polygon_area,
     signed_margin,
 )
+from executive.posture import standing_pelvis_height
 from executive.risk.fall_batch import (
     edge_probabilities_batch,
     halfplanes_batch,
@@ -444,6 +453,32 @@ def _seed_batch(margins: FloatArray, radius: float, exponent: float) -> FloatArr
     return np.asarray(np.where(margins >= radius, 0.0, risk), dtype=float)
 
 
+def _posture_probability(
+    world: World, pelvis: FloatArray, upright: FloatArray, sigma: float
+) -> dict[str, float]:
+    """The safe posture's part of P(fall) (module doc, "Posture") and its numbers, for the details.
+
+    ``pelvis``: the planned pelvis heights (m) per knot; ``upright``: the torso z axis' vertical
+    component per knot; ``sigma``: the 1-sigma vertical error (m).
+    """
+    posture = world.profile.safe_posture
+    ids = world.ids
+    floor = standing_pelvis_height(world.model, ids.keyframe, ids.base_body) - posture.fall_pelvis_drop
+    lowest = float(np.min(pelvis))
+    if sigma > 0.0:
+        p_pelvis = float(normal_cdf((floor - lowest) / sigma))
+    else:
+        p_pelvis = 1.0 if lowest < floor else 0.0
+    tilt = float(np.degrees(np.arccos(np.clip(np.min(upright), -1.0, 1.0))))
+    return {
+        "min_pelvis_height": lowest,
+        "pelvis_floor": floor,
+        "probability_pelvis": float(p_pelvis),
+        "max_trunk_tilt_deg": tilt,
+        "probability_tilt": 1.0 if tilt > posture.fall_tilt_deg else 0.0,
+    }
+
+
 def assess_fall(
     world: World, trajectory: Trajectory, risk_config: RiskConfig, uncertainty: Uncertainty
 ) -> RiskReport:
@@ -475,6 +510,8 @@ def assess_fall(
     coms = np.zeros((count, 3))
     xpos = np.zeros((count, len(feet), 3))
     xmat = np.zeros((count, len(feet), 9))
+    pelvis, upright = np.zeros(count), np.zeros(count)
+    torso = world.ids.torso_body
     for k in range(count):
         data.qpos[:] = qpos[k]
         mujoco.mj_kinematics(model, data)
@@ -482,6 +519,8 @@ def assess_fall(
         coms[k] = data.subtree_com[base]
         xpos[k] = data.geom_xpos[feet]
         xmat[k] = data.geom_xmat[feet]
+        pelvis[k] = data.xpos[base][2]
+        upright[k] = data.xmat[torso][8]
     ground = _ground_height(world, data)
     points = _foot_points_batch(world, xpos, xmat.reshape(count, len(feet), 3, 3))
     polygons = hulls(points[..., :2], points[..., 2] <= ground + 0.01)
@@ -523,7 +562,15 @@ def assess_fall(
         boole = union_bounds(edge_probabilities(safe, zero, cov))[1]
     worst = float(np.max(per_knot))
     lower_bound = max(worst, float(np.max(lower_k)))
-    probability = float(np.clip(probability, lower_bound, max(boole, lower_bound)))
+    upper_bound = max(boole, lower_bound)
+    probability = float(np.clip(probability, lower_bound, upper_bound))
+    posture = _posture_probability(world, pelvis, upright, float(uncertainty.com))
+
+    def with_posture(p: float) -> float:
+        # 1 - prod(1 - p_i) as -expm1(sum log1p(-p_i)): a 1e-30 keeps its digits.
+        terms = np.array([p, posture["probability_pelvis"], posture["probability_tilt"]])
+        with np.errstate(divide="ignore"):
+            return float(-np.expm1(np.sum(np.log1p(-terms))))
 
     k_min, k_cap, k_worst = int(np.argmin(margins)), int(np.argmin(capture)), int(np.argmax(per_knot))
     mismatch = (
@@ -533,8 +580,8 @@ def assess_fall(
     )
     return RiskReport(
         mode="fall",
-        probability=probability,
-        probability_bounds=(lower_bound, max(boole, lower_bound)),
+        probability=with_posture(probability),
+        probability_bounds=(with_posture(lower_bound), with_posture(upper_bound)),
         severity=float(risk_config.severity.fall),
         seed_score=float(np.max(seed)),
         times=times.copy(),
@@ -547,6 +594,7 @@ def assess_fall(
             "capture_margin": capture,
             "com_x": coms[:, 0].copy(),
             "com_y": coms[:, 1].copy(),
+            "pelvis_height": pelvis,
         },
         details={
             "min_margin": float(margins[k_min]),
@@ -559,5 +607,7 @@ def assess_fall(
             "com_sigma": float(uncertainty.com),
             "com_path_mismatch": mismatch,
             "support_area": polygon_area(polygons.polygon(k_min)),
+            "probability_support": probability,
+            **posture,
         },
     )

@@ -10,6 +10,11 @@ The schema by example is ``scenarios/robots/humanoid/profile.yaml``::
     keyframe: stand
     home_joints: {name: angle}    # optional; rad, replacing the keyframe's angles of these joints
     return_along_lane: false      # optional; a hand that placed across the body goes back first
+    safe_posture:                 # optional; each key optional (defaults: executive.posture.SafePosture)
+      max_pelvis_drop: 0.10       # m below standing the planner may lower the pelvis
+      max_trunk_tilt_deg: 20      # deg the planner may tilt the torso
+      pelvis_tolerance: 0.05      # m deeper than that the detector still accepts
+      tilt_tolerance_deg: 10      # deg more tilt the detector still accepts
     waist_joints: [...]
     legs: {left: [...], right: [...]}
     feet: {left: {body: ..., geoms: [...]}, right: {...}}      # geoms optional
@@ -34,6 +39,7 @@ from pathlib import Path
 
 from executive import registry
 from executive.errors import RobotProfileError
+from executive.posture import SafePosture
 from executive.robots.profile_types import ArmProfile, FootProfile, GripperProfile, HandFrame, RobotProfile
 from executive.validation import Node, load_yaml_file, load_yaml_text
 
@@ -43,7 +49,7 @@ __all__ = ["SIDES", "load_bundled_profile", "load_profile", "loads_profile", "pr
 SIDES: tuple[str, ...] = ("left", "right")
 
 _TOP_REQUIRED = ("name", "base_body", "torso_body", "keyframe", "waist_joints", "legs", "feet", "arms")
-_TOP_OPTIONAL = ("mjcf", "head_body", "home_joints", "return_along_lane")
+_TOP_OPTIONAL = ("mjcf", "head_body", "home_joints", "return_along_lane", "safe_posture")
 
 
 def load_profile(path: Path) -> RobotProfile:
@@ -89,6 +95,8 @@ def profile_from_node(root: Node, base_dir: Path, source_path: Path | None = Non
     leg_joints = {side: node.strings(min_len=1) for side, node in _sides(root.get("legs"))}
     feet = {side: _foot(node) for side, node in _sides(root.get("feet"))}
     arms = {side: _arm(node) for side, node in _sides(root.get("arms"))}
+    posture_node = root.opt("safe_posture")
+    safe_posture = _safe_posture(posture_node) if posture_node is not None else SafePosture()
     profile = RobotProfile(
         name=name,
         base_body=base_body,
@@ -103,9 +111,21 @@ def profile_from_node(root: Node, base_dir: Path, source_path: Path | None = Non
         source=source_path,
         home_joints=home_joints,
         return_along_lane=return_along_lane,
+        safe_posture=safe_posture,
     )
     _check_unique_joints(root, profile)
     return profile
+
+
+def _safe_posture(node: Node) -> SafePosture:
+    keys = ("max_pelvis_drop", "max_trunk_tilt_deg", "pelvis_tolerance", "tilt_tolerance_deg")
+    node.check_keys(optional=keys)
+    values = {}
+    for key in keys:
+        child = node.opt(key)
+        if child is not None:
+            values[key] = child.number(ge=0.0, le=90.0) if key.endswith("deg") else child.number(ge=0.0)
+    return SafePosture(**values)
 
 
 def _sides(node: Node) -> list[tuple[str, Node]]:

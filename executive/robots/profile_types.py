@@ -10,6 +10,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from executive.posture import SafePosture
+
 __all__ = ["ArmProfile", "FootProfile", "GripperProfile", "HandFrame", "RobotProfile"]
 
 
@@ -83,6 +85,9 @@ class RobotProfile:
     # configuration with the waist bent). Off by default: on the bundled humanoid that extra
     # reach unloads a foot (the live guard measures the CoM 73 mm outside the foot contacts).
     return_along_lane: bool = False
+    # The safe posture (pelvis drop, trunk tilt) the planner keeps to and the fall detector and
+    # fall model measure against (executive.posture).
+    safe_posture: SafePosture = field(default_factory=SafePosture)
 
     @property
     def sides(self) -> tuple[str, ...]:
