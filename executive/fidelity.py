@@ -497,7 +497,7 @@ def _footer(summary: dict[str, Any]) -> list[str]:
     return [
         "regret (cross-fitted, per-trial choice minus best fixed alternative): "
         f"mean {_num(r['mean'], '+.3f')} "
-        f"over {r['variants_scored']} variant(s) (in-sample, biased low: {_num(r['mean_naive'], '+.3f')}); "
+        f"over {r['variants_scored']} variant(s) (in-sample, biased high: {_num(r['mean_naive'], '+.3f')}); "
         f"significantly above zero in {r['significant_above_zero']}, below in {r['significant_below_zero']} "
         "(exact sign test, 5%; marked *)",
         f"all trials pooled: regret {_num(pooled['regret'], '+.3f')} over {pooled['trials']} trials, "

@@ -8,7 +8,9 @@ helps, zero when it does as well as always running the best one, positive when i
 loses to it.
 
 Picking "the best fixed alternative" on the trials it is scored on biases the regret
-downwards (the minimum of several noisy failure rates is below each of their means).
+upwards, against the choice: the lowest of several noisy failure rates is below the
+failure probability of the alternative it belongs to (for equal alternatives the bias is
+p - E[min of the binomial counts] / n).
 Cross-fitting removes that bias (Chernozhukov et al. 2018): the trials are split by
 the parity of their index; the best alternative is picked on the even trials and
 scored, with the choice, on the odd ones, then the other way round, and the per-trial

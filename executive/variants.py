@@ -126,6 +126,8 @@ def make_variant(
     rng = np.random.default_rng([seed, index])
     resting = {b.name for b in _bodies(base.scene) if _rests_on_table(b, base.scene.table)}
     rejections: dict[str, int] = {}
+    from_dict(document, f"{base.name} (the document variants are drawn from)")  # its own errors first
+    last = ""
     for attempt in range(r.max_redraws + 1):
         scene, targets, draws = _draw(base, rng, r)
         doc = _variant_document(base, document, scene, targets, index, seed)
@@ -134,17 +136,18 @@ def make_variant(
         if problem is None:
             try:
                 scenario = dataclasses.replace(from_dict(doc, f"variant {index}"), source=None)
-            except ScenarioError:
-                problem = "invalid"
+            except ScenarioError as exc:
+                problem = f"invalid: {exc}"
         if scenario is not None and problem is None:
             problem = scene_problem(scenario, resting, r.clearance_m) or _world_problem(scenario)
         if problem is None and scenario is not None:
             return Variant(index, doc, scenario, draws, attempt, rejections)
-        key = problem.split(":")[0] if problem else "invalid"
+        last = problem or "invalid"
+        key = last.split(":")[0]
         rejections[key] = rejections.get(key, 0) + 1
     raise ExecutiveError(
         f"variant {index} of {base.name}: no valid scene in {r.max_redraws + 1} draws "
-        f"(rejected: {', '.join(f'{k} {v}' for k, v in sorted(rejections.items()))}); "
+        f"(rejected: {', '.join(f'{k} {v}' for k, v in sorted(rejections.items()))}; the last: {last}); "
         "the scene leaves too little room for these ranges"
     )
 
