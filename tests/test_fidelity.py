@@ -129,12 +129,12 @@ def test_scene_problem_rejects_overlap_and_off_table(base: Scenario) -> None:
     assert scene_problem(base, resting, RANGES.clearance_m) is None
     into_stack = dataclasses.replace(book, position=(stack.position[0], 0.12, book.position[2]))
     scene = dataclasses.replace(base.scene, objects=(into_stack,))
-    assert scene_problem(dataclasses.replace(base, scene=scene), resting, 0.01).startswith("overlap")
+    assert str(scene_problem(dataclasses.replace(base, scene=scene), resting, 0.01)).startswith("overlap")
     table = base.scene.table
     edge_y = table.position[1] + table.size[1] / 2 - 0.02  # centre on the top, an end over the edge
     off = dataclasses.replace(book, position=(book.position[0], edge_y, book.position[2]))
     scene = dataclasses.replace(base.scene, objects=(off,))
-    assert scene_problem(dataclasses.replace(base, scene=scene), resting, 0.01).startswith("off_table")
+    assert str(scene_problem(dataclasses.replace(base, scene=scene), resting, 0.01)).startswith("off_table")
 
 
 # --- regret -------------------------------------------------------------------------------------
