@@ -424,12 +424,13 @@ def _draws_text(row: dict[str, Any]) -> str:
 
 
 def _alternative_cell(a: dict[str, Any]) -> str:
-    """``value P(any) observed%`` of one alternative on one variant."""
+    """``value P(any) observed% [95% CI]`` of one alternative on one variant."""
     if not a["trials"]:
         return "infeasible"
-    return f"{_num(a['predicted_value'])} {_num(a['predicted_combined'])} {100 * a['failure_rate']:.0f}%" + (
-        f" ({a['infeasible']} inf.)" if a["infeasible"] else ""
-    )
+    low, high = a["ci95"]
+    infeasible = f" ({a['infeasible']} inf.)" if a["infeasible"] else ""
+    predicted = f"{_num(a['predicted_value'])} {_num(a['predicted_combined'])}"
+    return f"{predicted} {100 * a['failure_rate']:.0f}% [{100 * low:.0f},{100 * high:.0f}]{infeasible}"
 
 
 def _progress_line(row: dict[str, Any], total: int) -> str:
@@ -468,7 +469,7 @@ def _rows(summary: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
         "variant",
         "scene",
         "redraws",
-        *[f"{a}: value P(any) obs" for a in summary["alternatives"]],
+        *[f"{a}: value P(any) observed [95% CI]" for a in summary["alternatives"]],
         "Spearman",
         "chosen failed",
         "best failed",
@@ -513,7 +514,9 @@ def table_text(summary: dict[str, Any]) -> str:
     """The suite's results as aligned text (what ``executive fidelity`` prints)."""
     header, rows = _rows(summary)
     widths = [max(len(c) for c in column) for column in zip(header, *rows, strict=True)]
-    lines = ["  ".join(c.ljust(w) for c, w in zip(line, widths, strict=True)) for line in [header, *rows]]
+    lines = [
+        "  ".join(c.ljust(w) for c, w in zip(line, widths, strict=True)).rstrip() for line in [header, *rows]
+    ]
     lines.append("")
     lines.append("pooled   events / trials   ROC AUC   Brier    ECE")
     for mode, m in summary["pooled"].items():
