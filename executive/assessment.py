@@ -16,13 +16,17 @@ Per alternative (DESIGN.md, "Data flow of one decision"):
   placement it leads to: the jaws centre the object across them, but its error
   along them stays in the hand and lands on the target, where the failure
   detector calls it misplaced beyond ``place_position_tol`` (see :func:`_grasp`);
+  its union with the hold risk (:mod:`executive.risk.hold`: a grip that slips under
+  the object's weight and the plan's accelerations, or a handover receiver that
+  misses an object turned in the giver's jaws) is the drop mode (:func:`drop_union`);
 * combined: :func:`executive.risk.combine.combine`.
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -34,11 +38,12 @@ from executive.risk.collision import CollisionModel, CollisionProfile, KnotDista
 from executive.risk.combine import CombinedRisk, combine
 from executive.risk.fall import assess_fall
 from executive.risk.grasp import GraspTolerance, assess_grasp, grasp_error, grasp_tolerance, hand_pose_at
+from executive.risk.hold import assess_hold
 from executive.risk.report import RiskReport
 from executive.scenario_types import TransferTask
 from executive.world import World
 
-__all__ = ["AlternativeRisk", "assess_plan", "assess_task", "concatenate"]
+__all__ = ["AlternativeRisk", "assess_plan", "assess_task", "concatenate", "drop_union"]
 
 
 @dataclass(frozen=True)
@@ -52,6 +57,7 @@ class AlternativeRisk:
     error: str = ""
     plan_s: float = 0.0
     assess_s: float = 0.0
+    physics: dict[str, Any] | None = None  # the physics check's summary (executive.risk.rollouts)
 
 
 def concatenate(trajectories: list[Trajectory], name: str) -> Trajectory:
@@ -106,7 +112,29 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
     grasp_step = next(s for s in plan.steps if s.kind == "grasp")
     approach = [s for s in plan.steps[: plan.steps.index(grasp_step)] if s.name in plan.trajectories][-1]
     grasp = _grasp(world, grasp_step.side, plan.task.object, plan.trajectories[approach.name])
-    return combine([collision, fall, grasp], scenario.risk)
+    hold = assess_hold(world, plan, scenario.risk, scenario.uncertainty)
+    return combine([collision, fall, drop_union(grasp, hold)], scenario.risk)
+
+
+def drop_union(grasp: RiskReport, hold: RiskReport) -> RiskReport:
+    """The drop mode: the grasp (pose) failure or the hold (mass, friction) failure.
+
+    probability: 1 - (1 - p_grasp)(1 - p_hold), as if independent (the pose error and the
+    mass are drawn independently; the lateral error enters both, so the Fréchet bounds
+    max(p) <= P <= min(1, sum p) are kept as the bounds). details: the grasp's, the hold's, and
+    ``drop_reason`` naming the likelier of the two.
+    """
+    pg, ph = grasp.probability, hold.probability
+    lower = max(grasp.probability_bounds[0], hold.probability_bounds[0])
+    upper = min(1.0, grasp.probability_bounds[1] + hold.probability_bounds[1])
+    details = {**grasp.details, **hold.details, "grasp_probability": pg, "hold_probability": ph}
+    details["drop_reason"] = "hold: the grip slips or a handover's receiver misses" if ph > pg else "grasp"
+    return replace(
+        grasp,
+        probability=1.0 - (1.0 - pg) * (1.0 - ph),
+        probability_bounds=(lower, upper),
+        details=details,
+    )
 
 
 def _grasp(world: World, side: str, obj: str, approach: Trajectory) -> RiskReport:

@@ -48,6 +48,7 @@ __all__ = [
     "grasp_matrix",
     "grasp_quality",
     "grasp_tolerance",
+    "half_extent",
     "hand_pose_at",
     "logistic_risk",
     "seed_grasp_risk",
@@ -179,8 +180,8 @@ def grasp_error(
     return GraspError(float(offset @ closing), float(offset @ lateral), yaw)
 
 
-def _half_extent(model: mujoco.MjModel, geom: int, axis_local: FloatArray) -> float:
-    """Half the extent of a geom along a unit axis of its own frame."""
+def half_extent(model: mujoco.MjModel, geom: int, axis_local: FloatArray) -> float:
+    """Half the extent of a geom along a unit axis of its own frame (box, sphere, cylinder; else rbound)."""
     size = model.geom_size[geom]
     kind = int(model.geom_type[geom])
     if kind == mujoco.mjtGeom.mjGEOM_BOX:
@@ -242,8 +243,8 @@ def grasp_tolerance(
     if np.linalg.norm(l_axis) < 1e-9:
         l_axis = np.array([1.0, 0.0, 0.0])
     l_axis /= np.linalg.norm(l_axis)
-    width = 2.0 * _half_extent(model, geom, c_axis)
-    length = 2.0 * _half_extent(model, geom, l_axis)
+    width = 2.0 * half_extent(model, geom, c_axis)
+    length = 2.0 * half_extent(model, geom, l_axis)
     rot = world.data.geom_xmat[geom].reshape(3, 3)
     if _is_axisymmetric(model, geom, rot):
         yaw = np.pi / 2.0 if width <= jaw_opening else 0.0

@@ -1,0 +1,803 @@
+"""Hold risk: will a parallel-jaw grip keep a carried object, given its mass and friction?
+
+A grip holds while the friction its pads supply covers the object's weight and the plan's
+accelerations, and while the object does not turn in the jaws far enough to be lost. The
+model, per hand and per knot of the planned trajectories while that hand holds the object:
+
+* Grip force: the jaw servo's force on the object, min(kp |q_contact - q_closed|,
+  forcerange) per finger (a position servo closing on an object it cannot reach).
+* Contact friction as MuJoCo mixes it (MuJoCo docs, "Contact parameters"): the geom of higher
+  ``priority`` gives its parameters; equal priorities take the element-wise maximum friction
+  and the solmix-weighted solref/solimp. The truth's friction factor scales the object's
+  friction only, so a pad of higher priority makes the grip blind to it.
+* Contact patch: the overlap of each pad's face with the object's section across the jaws;
+  MuJoCo's box-box collision puts one contact at each corner of the overlap (4 per pad), each
+  carrying a quarter of the pad's normal force.
+* Slip (Coulomb friction with the ellipsoidal limit surface of a planar patch, Howe &
+  Cutkosky 1996, "Practical force-motion models for sliding manipulation"):
+  (f_t / f_max)^2 + (tau / tau_max)^2 > 1, with f_t the load across the jaws' normal,
+  m |a - g| projected on the pad plane, tau its moment about the closing axis through the
+  patch centre, f_max = mu sum f_n and tau_max = sum f_n,i (mu r_i + mu_torsion) (MuJoCo's
+  condim 4 elliptic cone adds the torsional coefficient mu_torsion, a length).
+* Creep (MuJoCo's soft constraints, docs "Computation / Soft constraints"): inside the cone a
+  frictional constraint still slides at v = R f / b, R = (1 - d)/d A_ii / impratio per
+  friction row (elliptic cones; torsional rows R mu^2 / mu_torsion^2), b = 2 / (dmax
+  timeconst), A_ii MuJoCo's diagonal approximation body_invweight0 of the two bodies and d the
+  solimp impedance at the contact's resting penetration. Under a
+  moment tau the object turns about the closing axis at omega = tau / (b sum_i (r_i^2 / R_t +
+  1 / R_tor)). The turn accumulated while one hand holds the object on its own lowers the
+  far end where a handover's receiver closes its jaws, together with the giving arm's servo
+  sag under the object's weight, dx = J Kp^-1 J^T m g (servos without feed-forward of the
+  object's weight): the receiver misses when that drop exceeds the planned depth of its pads
+  on the object, or when its pads do not overlap the object along the jaws.
+
+Uncertainty, as :func:`executive.world.sample_perturbation` draws the truth: mass m = m0
+max(0.2, 1 + s_m z), the object's friction mu0 max(0.2, 1 + s_f z'), and the object's position
+error e ~ N(0, s_p^2) along the grip's lateral axis, which moves the grasp point on the object.
+Every failure above grows with m at fixed (e, mu), so each (e, mu) has one critical mass
+m_c(e, mu) (the smallest over hands, knots and the receiver's miss; the union of the failures
+is exact), and P = E_{e, mu}[P(m >= m_c)] in closed form in m, by Gauss-Hermite quadrature over
+e and mu. Neglected: the object's rotational inertia, the creep's dependence on the truth mass
+through A_ii, and moments about the axes across the jaws (taken by the pads' pressure).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+from scipy.special import ndtr
+
+from executive.errors import ExecutiveError
+from executive.planning_timing import Trajectory
+from executive.risk.gaussian import gauss_hermite_normal
+from executive.risk.grasp import half_extent
+from executive.risk.report import RiskReport
+from executive.scenario_types import RiskConfig, Uncertainty
+from executive.world import World
+
+__all__ = [
+    "CarrySpan",
+    "ContactParameters",
+    "Grip",
+    "HoldModelUnavailable",
+    "HoldProblem",
+    "Patch",
+    "ReceiverMiss",
+    "aligned_probability",
+    "assess_hold",
+    "contact_parameters",
+    "creep_compliance",
+    "critical_mass",
+    "grip",
+    "hold_capacity",
+    "hold_probability",
+    "patch",
+    "servo_sag",
+    "slip_critical_mass",
+]
+
+FloatArray = NDArray[np.float64]
+GRAVITY = np.array([0.0, 0.0, -9.81])
+#: The truth sampler's floor on its mass and friction factors (executive.world.sample_perturbation).
+SCALE_FLOOR = 0.2
+
+
+class HoldModelUnavailable(ExecutiveError):
+    """The hold model cannot describe this hand (e.g. no parallel jaws on slide joints)."""
+
+
+# --- contact parameters as MuJoCo mixes them -----------------------------------------------
+
+
+@dataclass(frozen=True)
+class ContactParameters:
+    """Parameters of one geom pair's contacts: mu (sliding), mu_torsion (m), timeconst, dmax."""
+
+    mu: float
+    mu_torsion: float
+    condim: int
+    timeconst: float
+    dampratio: float
+    dmax: float
+    solimp: tuple[float, ...] = (0.9, 0.95, 0.001, 0.5, 2.0)
+
+
+def contact_parameters(
+    model: mujoco.MjModel, geom_a: int, geom_b: int, friction_scale_b: float = 1.0
+) -> ContactParameters:
+    """The parameters MuJoCo gives contacts between two geoms (MuJoCo docs, "Contact parameters").
+
+    Args:
+        model: the compiled model.
+        geom_a: a geom id (e.g. a pad).
+        geom_b: a geom id (e.g. the object); its friction is scaled by ``friction_scale_b``
+            (how a truth world scales the object's friction).
+        friction_scale_b: factor on geom_b's friction.
+
+    Returns:
+        The mixed parameters; timeconst is clamped to 2 timesteps as MuJoCo's refsafe does.
+    """
+    fa = np.array(model.geom_friction[geom_a], dtype=float)
+    fb = np.array(model.geom_friction[geom_b], dtype=float) * friction_scale_b
+    pa, pb = int(model.geom_priority[geom_a]), int(model.geom_priority[geom_b])
+    if pa != pb:
+        win = geom_a if pa > pb else geom_b
+        friction = fa if pa > pb else fb
+        condim = int(model.geom_condim[win])
+        solref = np.array(model.geom_solref[win], dtype=float)
+        solimp = np.array(model.geom_solimp[win], dtype=float)
+    else:
+        friction = np.maximum(fa, fb)
+        condim = max(int(model.geom_condim[geom_a]), int(model.geom_condim[geom_b]))
+        ma, mb = float(model.geom_solmix[geom_a]), float(model.geom_solmix[geom_b])
+        w = 0.5 if ma + mb <= 0.0 else ma / (ma + mb)
+        solref = w * model.geom_solref[geom_a] + (1.0 - w) * model.geom_solref[geom_b]
+        solimp = w * model.geom_solimp[geom_a] + (1.0 - w) * model.geom_solimp[geom_b]
+    timeconst = max(float(solref[0]), 2.0 * float(model.opt.timestep)) if solref[0] > 0 else 0.0
+    return ContactParameters(
+        mu=float(friction[0]),
+        mu_torsion=float(friction[1]) if condim >= 4 else 0.0,
+        condim=condim,
+        timeconst=timeconst,
+        dampratio=float(solref[1]),
+        dmax=float(solimp[1]),
+        solimp=tuple(float(v) for v in solimp),
+    )
+
+
+def impedance(solimp: tuple[float, ...], penetration: float) -> float:
+    """MuJoCo's constraint impedance d(r) (docs, "Solver parameters"): dmin..dmax over the width."""
+    dmin, dmax, width, mid, power = solimp
+    x = min(1.0, abs(penetration) / width) if width > 0 else 1.0
+    if power == 1.0 or x >= 1.0:
+        y = x
+    elif x <= mid:
+        y = x**power / mid ** (power - 1.0)
+    else:
+        y = 1.0 - (1.0 - x) ** power / (1.0 - mid) ** (power - 1.0)
+    return float(np.clip(dmin + y * (dmax - dmin), 1e-4, 0.9999))
+
+
+def contact_impedance(c: ContactParameters, inv_weight: float, normal_force: float) -> tuple[float, float]:
+    """The impedance d and penetration r (m) of a resting contact carrying ``normal_force`` (N).
+
+    At rest MuJoCo's soft normal constraint balances f = k d r / R with k = 1 / (dmax tc dr)^2 and
+    R = (1 - d)/d A: f = d(r)^2 r / ((1 - d(r)) A (dmax tc dr)^2), solved for the penetration r
+    by bisection (f grows with r).
+    """
+    if c.timeconst <= 0.0:
+        return c.dmax, 0.0
+    scale = inv_weight * (c.dmax * c.timeconst * c.dampratio) ** 2
+
+    def force(r: float) -> float:
+        d = impedance(c.solimp, r)
+        return d * d * r / ((1.0 - d) * scale)
+
+    lo, hi = 0.0, max(c.solimp[2], 1e-6)
+    while force(hi) < normal_force and hi < 1.0:
+        hi *= 2.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if force(mid) < normal_force else (lo, mid)
+    r = 0.5 * (lo + hi)
+    return impedance(c.solimp, r), r
+
+
+# --- the gripper ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Grip:
+    """One hand's parallel jaw closed on an object.
+
+    force: N, normal force of each pad on the object; pads: the pad geom ids; pad_centre /
+    pad_half: each pad's centre and half extents along the hand site's x (lateral) and z
+    (approach) axes, in the site frame (m); contact: the pad-object contact parameters at
+    nominal friction; inv_weight: MuJoCo's body_invweight0 (translation) of pad body + object.
+    """
+
+    side: str
+    force: float
+    pads: tuple[int, ...]
+    pad_centre: FloatArray  # (2,) x z
+    pad_half: FloatArray  # (2,) x z
+    contact: ContactParameters
+    inv_weight: float
+    impratio: float
+    pad_friction_wins: bool  # the pad's priority is higher: the object's friction never counts
+
+
+def _pad_geom(model: mujoco.MjModel, body: int) -> int:
+    """The collidable geom of a finger body with the highest priority (then condim): its pad."""
+    geoms = [
+        g
+        for g in range(model.ngeom)
+        if model.geom_bodyid[g] == body and (model.geom_contype[g] or model.geom_conaffinity[g])
+    ]
+    if not geoms:
+        raise HoldModelUnavailable(f"finger body {body} has no collidable geom")
+    return max(geoms, key=lambda g: (int(model.geom_priority[g]), int(model.geom_condim[g]), -g))
+
+
+def _servo_force(model: mujoco.MjModel, actuator: int, q_contact: float, q_closed: float) -> float:
+    """Force of a position servo holding at q_contact while told q_closed: kp |error|, clipped."""
+    kp = float(model.actuator_gainprm[actuator, 0])
+    force = kp * abs(q_contact - q_closed)
+    if model.actuator_forcelimited[actuator]:
+        force = min(force, float(np.max(np.abs(model.actuator_forcerange[actuator]))))
+    return force
+
+
+def _geom_half_extent(model: mujoco.MjModel, geom: int, axis_body: FloatArray) -> float:
+    """Half the extent of a geom along a unit axis of its body's frame."""
+    rot = np.zeros(9)
+    mujoco.mju_quat2Mat(rot, model.geom_quat[geom])
+    return half_extent(model, geom, rot.reshape(3, 3).T @ axis_body)
+
+
+def grip(world: World, side: str, obj: str, closing_axis_object: FloatArray) -> Grip:
+    """The ``side`` hand's jaw closed on ``obj`` across ``closing_axis_object`` (object frame).
+
+    Args:
+        world: the estimate world (its data places the pads in the hand; any pose will do).
+        side: an arm of the profile.
+        obj: an object of the scene.
+        closing_axis_object: unit vector, the jaws' closing axis in the object's body frame.
+
+    Returns:
+        The :class:`Grip`.
+
+    Raises:
+        HoldModelUnavailable: the gripper's actuators are not position servos on slide joints
+            (e.g. a dexterous hand), so no jaw force can be read off the model.
+    """
+    model, data = world.model, world.data
+    acts = world.ids.gripper_actuators[side]
+    joints = [int(model.actuator_trnid[a, 0]) for a in acts]
+    if not acts or any(
+        model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT
+        or model.jnt_type[j] != mujoco.mjtJoint.mjJNT_SLIDE
+        or model.actuator_biastype[a] != mujoco.mjtBias.mjBIAS_AFFINE
+        for a, j in zip(acts, joints, strict=True)
+    ):
+        raise HoldModelUnavailable(
+            f"the {side} gripper is not a parallel jaw of position servos on slide joints; "
+            "the hold model does not cover it"
+        )
+    geom = world.ids.object_geoms[obj]
+    width = 2.0 * _geom_half_extent(model, geom, np.asarray(closing_axis_object, dtype=float))
+    closed = world.profile.arms[side].gripper.closed
+    force = min(_servo_force(model, a, width / 2.0, c) for a, c in zip(acts, closed, strict=True))
+    pads = tuple(_pad_geom(model, int(model.jnt_bodyid[j])) for j in joints)
+    site = world.ids.hand_sites[side]
+    rot = data.site_xmat[site].reshape(3, 3)
+    centres, halves = [], []
+    for pad in pads:
+        rel = rot.T @ data.geom_xmat[pad].reshape(3, 3)
+        centres.append(rot.T @ (data.geom_xpos[pad] - data.site_xpos[site]))
+        halves.append(np.abs(rel) @ model.geom_size[pad])
+    centre, half = np.mean(centres, axis=0), np.min(halves, axis=0)
+    body_pad, body_obj = int(model.geom_bodyid[pads[0]]), int(model.geom_bodyid[geom])
+    pa, pb = int(model.geom_priority[pads[0]]), int(model.geom_priority[geom])
+    wins = pa > pb
+    return Grip(
+        side=side,
+        force=force,
+        pads=pads,
+        pad_centre=np.array([centre[0], centre[2]]),
+        pad_half=np.array([half[0], half[2]]),
+        contact=contact_parameters(model, pads[0], geom),
+        inv_weight=float(model.body_invweight0[body_pad, 0] + model.body_invweight0[body_obj, 0]),
+        impratio=float(model.opt.impratio),
+        pad_friction_wins=bool(wins),
+    )
+
+
+# --- contact patch, capacity and creep ------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Patch:
+    """The pads' overlap with the object, per lateral offset: centre (x, z) and half sizes (m)."""
+
+    centre: FloatArray  # (n, 2)
+    half: FloatArray  # (n, 2), 0 where the pad misses the object
+
+    @property
+    def radius(self) -> FloatArray:
+        """Distance of the patch's corner contacts from its centre."""
+        return np.asarray(np.hypot(self.half[:, 0], self.half[:, 1]), dtype=float)
+
+    @property
+    def touches(self) -> NDArray[np.bool_]:
+        return np.asarray((self.half > 0.0).all(axis=1))
+
+
+def patch(g: Grip, object_centre: FloatArray, object_half: FloatArray) -> Patch:
+    """Overlap of the pad face with the object's section, in the hand site's (x, z).
+
+    Args:
+        g: the grip.
+        object_centre: (n, 2) the object's centre (x, z) in the site frame, one row per offset.
+        object_half: (2,) the object's half extents along site x and z.
+
+    Returns:
+        The :class:`Patch` per row (an empty overlap has half sizes 0).
+    """
+    oc = np.atleast_2d(np.asarray(object_centre, dtype=float))
+    lo = np.maximum(g.pad_centre - g.pad_half, oc - object_half)
+    hi = np.minimum(g.pad_centre + g.pad_half, oc + object_half)
+    half = np.clip((hi - lo) / 2.0, 0.0, None)
+    return Patch(centre=(lo + hi) / 2.0, half=half)
+
+
+def hold_capacity(g: Grip, p: Patch, mu: float | FloatArray) -> tuple[FloatArray, FloatArray]:
+    """Largest force across the pad normal and moment about the closing axis the grip resists.
+
+    f_max = mu 2F (two pads); tau_max = 2F (mu r + mu_torsion), r the corner contacts' radius
+    (Coulomb friction per contact; MuJoCo's condim 4 torsional friction mu_torsion f_n).
+    """
+    total = 2.0 * g.force * p.touches
+    f_max = np.asarray(mu, dtype=float) * total
+    tau_max = total * (np.asarray(mu, dtype=float) * p.radius + g.contact.mu_torsion)
+    return np.asarray(f_max, dtype=float), np.asarray(tau_max, dtype=float)
+
+
+def creep_compliance(g: Grip, p: Patch, mu: float | None = None, per_pad: int = 4) -> FloatArray:
+    """rad/s per N m: the soft-contact creep rate of the object's turn about the closing axis.
+
+    omega = tau / (b sum_i (r_i^2 / R_t + 1 / R_tor)) over the 4 corner contacts of each pad, with
+    MuJoCo's R_n = (1 - d)/d A_ii, R_t = R_n / impratio, R_tor = R_t (mu / mu_torsion)^2 and
+    b = 2 / (dmax timeconst) (MuJoCo docs, "Soft constraints"); d is the impedance at the resting
+    penetration of a corner contact carrying a quarter of the pad's force
+    (:func:`contact_impedance`).
+    """
+    c = g.contact
+    if c.timeconst <= 0.0 or not 0.0 < c.dmax < 1.0:
+        return np.zeros(len(p.half))
+    mu_s = c.mu if mu is None else mu
+    d, _ = contact_impedance(c, g.inv_weight, g.force / per_pad)
+    r_n = (1.0 - d) / d * g.inv_weight
+    r_t = r_n / g.impratio
+    b = 2.0 / (c.dmax * c.timeconst)
+    stiff = p.radius**2 / r_t
+    if c.mu_torsion > 0.0:
+        stiff = stiff + 1.0 / (r_t * (mu_s / c.mu_torsion) ** 2)
+    resist = b * 2.0 * per_pad * stiff  # per_pad corner contacts on each of the 2 pads
+    out = np.where(p.touches & (resist > 0.0), 1.0 / np.where(resist > 0.0, resist, 1.0), 0.0)
+    return np.asarray(out, dtype=float)
+
+
+# --- the plan: who holds the object at which knot -----------------------------------------
+
+
+@dataclass
+class CarrySpan:
+    """The knots at which one hand holds the object: times (s), object rotations and COM path.
+
+    grasp_rotation / grasp_centre: the object's centre (COM) and rotation in the hand site
+    frame at the grasp (fixed while held); object_half: its half extents along site x and z.
+    alone: per knot, True when no other hand holds it.
+    """
+
+    side: str
+    grasp_rotation: FloatArray  # (3, 3) object frame -> site frame
+    grasp_centre: FloatArray  # (3,) object COM in the site frame
+    object_half: FloatArray  # (2,) the object's half extents along site x and z
+    times: list[float] = field(default_factory=list)
+    rotations: list[FloatArray] = field(default_factory=list)  # object rotation per knot
+    positions: list[FloatArray] = field(default_factory=list)  # object COM per knot
+    alone: list[bool] = field(default_factory=list)
+
+    def add(self, t: float, rotation: FloatArray, position: FloatArray, alone: bool) -> None:
+        if self.times and t <= self.times[-1] + 1e-9:
+            return
+        self.times.append(t)
+        self.rotations.append(rotation)
+        self.positions.append(position)
+        self.alone.append(alone)
+
+    def grip_forces(self) -> tuple[FloatArray, FloatArray]:
+        """Per knot, the grip force per unit mass a - g in the site frame (K, 3), and dt weights."""
+        t = np.asarray(self.times)
+        pos = np.asarray(self.positions).reshape(-1, 3)
+        if len(t) >= 3:
+            acc = np.gradient(np.gradient(pos, t, axis=0), t, axis=0)  # finite differences
+        else:
+            acc = np.zeros_like(pos)
+        site_rot = np.asarray(self.rotations) @ self.grasp_rotation.T  # world <- site
+        force = np.einsum("kji,kj->ki", site_rot, acc - GRAVITY)
+        dt = np.gradient(t) if len(t) >= 2 else np.zeros_like(t)
+        return force, dt
+
+
+@dataclass(frozen=True)
+class ReceiverMiss:
+    """A handover's receiver closing its jaws on the object the giver holds.
+
+    giver: the giver's span up to the receiver's grasp (plus the jaws' closing time);
+    depth: m the receiver's pads reach past the object's face along its approach axis (plan);
+    lever_cross / lever_cross2: y x r and y x (y x r) (world) for r from the giver's patch centre
+    to the receiver's site, y the giver's closing axis (Rodrigues: the point moves by
+    sin(t) y x r + (1 - cos t) y x (y x r) when the object turns t about y);
+    approach: the receiver's approach axis (world); sag: the giver hand's servo sag per kg
+    (world, m/kg); receiver: the receiver's grip; receiver_centre: the object's centre in the
+    receiver's site frame (plan); lateral_shift: how much of the object's lateral error along
+    the giver's x shows along the receiver's x; closing_s: the receiver's closing time.
+    """
+
+    giver: CarrySpan
+    depth: float
+    lever_cross: FloatArray
+    lever_cross2: FloatArray
+    approach: FloatArray
+    sag: FloatArray
+    receiver: Grip
+    receiver_centre: FloatArray
+    receiver_half: FloatArray
+    lateral_shift: float
+    closing_s: float
+
+
+def servo_sag(world: World, qpos: FloatArray, side: str) -> FloatArray:
+    """World displacement of the ``side`` hand site per kg held: J Kp^-1 J^T g (position servos).
+
+    The servos do not feed the held object's weight forward, so it bends each servoed joint by
+    tau / kp (a stiffness model of position servos); dofs without a servo are taken as rigid.
+    """
+    model = world.model
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_comPos(model, data)
+    jac = np.zeros((3, model.nv))
+    mujoco.mj_jacSite(model, data, jac, None, world.ids.hand_sites[side])
+    compliance = np.zeros(model.nv)
+    for a in range(model.nu):
+        if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT:
+            continue
+        joint = int(model.actuator_trnid[a, 0])
+        kp = float(model.actuator_gainprm[a, 0])
+        kind = int(model.jnt_type[joint])
+        if kind in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)) and kp > 0:
+            compliance[model.jnt_dofadr[joint]] = 1.0 / kp
+    return np.asarray(jac @ (compliance * (jac.T @ GRAVITY)), dtype=float)
+
+
+@dataclass
+class HoldProblem:
+    """Everything the hold probability needs from one planned alternative."""
+
+    obj: str
+    mass: float
+    spans: list[tuple[CarrySpan, Grip]] = field(default_factory=list)
+    misses: list[ReceiverMiss] = field(default_factory=list)
+
+
+def _object_pose(world: World, qpos: FloatArray, obj: str) -> tuple[FloatArray, FloatArray]:
+    """The object's rotation and COM (world) in a configuration ``qpos``."""
+    adr = world.ids.object_qpos[obj]
+    rot = np.zeros(9)
+    quat = np.asarray(qpos[adr + 3 : adr + 7], dtype=float)
+    mujoco.mju_quat2Mat(rot, quat / np.linalg.norm(quat))
+    r = rot.reshape(3, 3)
+    com = (
+        np.asarray(qpos[adr : adr + 3], dtype=float) + r @ world.model.body_ipos[world.ids.object_bodies[obj]]
+    )
+    return r, com
+
+
+def _site_pose(world: World, qpos: FloatArray, side: str) -> tuple[FloatArray, FloatArray]:
+    data = mujoco.MjData(world.model)
+    data.qpos[:] = qpos
+    mujoco.mj_kinematics(world.model, data)
+    site = world.ids.hand_sites[side]
+    return data.site_xpos[site].copy(), data.site_xmat[site].reshape(3, 3).copy()
+
+
+def _object_half(world: World, obj: str, obj_rot: FloatArray, site_rot: FloatArray) -> FloatArray:
+    """The object's half extents along the site's x and z axes (object body frame conversion)."""
+    geom = world.ids.object_geoms[obj]
+    axes = obj_rot.T @ site_rot
+    return np.array([_geom_half_extent(world.model, geom, axes[:, i]) for i in (0, 2)])
+
+
+def _receiver_miss(
+    world: World, qpos: FloatArray, obj: str, giver: tuple[CarrySpan, Grip], side: str, closing_s: float
+) -> ReceiverMiss:
+    """The geometry of the receiver ``side`` closing on the object ``giver`` holds at ``qpos``."""
+    span, g = giver
+    obj_rot, com = _object_pose(world, qpos, obj)
+    giver_rot = obj_rot @ span.grasp_rotation.T
+    giver_pos = com - giver_rot @ span.grasp_centre
+    half_g = _object_half(world, obj, obj_rot, giver_rot)
+    pg = patch(g, span.grasp_centre[[0, 2]][None, :], half_g)
+    centre_world = giver_pos + giver_rot @ np.array([pg.centre[0, 0], 0.0, pg.centre[0, 1]])
+    rec_pos, rec_rot = _site_pose(world, qpos, side)
+    axis = giver_rot[:, 1]
+    lever = rec_pos - centre_world
+    rec_half = _object_half(world, obj, obj_rot, rec_rot)
+    rec_centre = rec_rot.T @ (com - rec_pos)
+    receiver = grip(world, side, obj, obj_rot.T @ rec_rot[:, 1])
+    depth = receiver.pad_centre[1] + receiver.pad_half[1] - (rec_centre[2] - rec_half[1])
+    return ReceiverMiss(
+        giver=span,
+        depth=float(depth),
+        lever_cross=np.cross(axis, lever),
+        lever_cross2=np.cross(axis, np.cross(axis, lever)),
+        approach=rec_rot[:, 2].copy(),
+        sag=servo_sag(world, qpos, g.side),
+        receiver=receiver,
+        receiver_centre=rec_centre[[0, 2]],
+        receiver_half=rec_half,
+        lateral_shift=float(giver_rot[:, 0] @ rec_rot[:, 0]),
+        closing_s=closing_s,
+    )
+
+
+def hold_problem(world: World, plan: object, closing_s: float = 0.5) -> HoldProblem:
+    """Walk a planned alternative's steps: who holds the object when, and each handover.
+
+    Args:
+        world: the estimate world the plan was made on.
+        plan: an :class:`executive.composition.AlternativePlan` (steps with kind, name, side;
+            trajectories by step name; task.object).
+        closing_s: time a grasp's jaws take to close and settle (the Grasp behaviour's settle
+            time), spent with the object at rest in the hands that already hold it.
+
+    Returns:
+        The :class:`HoldProblem`.
+
+    Raises:
+        HoldModelUnavailable: a grasping hand is not a parallel jaw (see :func:`grip`).
+    """
+    obj: str = plan.task.object  # type: ignore[attr-defined]
+    body = world.ids.object_bodies[obj]
+    problem = HoldProblem(obj=obj, mass=float(world.model.body_mass[body]))
+    holding: dict[str, tuple[CarrySpan, Grip]] = {}
+    qpos, t_now = world.data.qpos.copy(), 0.0
+    trajectories: dict[str, Trajectory] = plan.trajectories  # type: ignore[attr-defined]
+    for step in plan.steps:  # type: ignore[attr-defined]
+        traj = trajectories.get(step.name)
+        if traj is not None:
+            for k, t in enumerate(traj.times):
+                rot, com = _object_pose(world, traj.qpos[k], obj)
+                for span, _ in holding.values():
+                    span.add(t_now + float(t), rot, com, len(holding) == 1)
+            t_now, qpos = t_now + traj.duration, traj.qpos[-1]
+        elif step.kind == "grasp" and step.side not in holding:
+            rot, com = _object_pose(world, qpos, obj)
+            t_now += closing_s
+            for span, _ in holding.values():
+                span.add(t_now, rot, com, len(holding) == 1)
+            if holding:
+                giver = next(iter(holding.values()))
+                problem.misses.append(_receiver_miss(world, qpos, obj, giver, step.side, closing_s))
+            site_pos, site_rot = _site_pose(world, qpos, step.side)
+            g = grip(world, step.side, obj, rot.T @ site_rot[:, 1])
+            half = _object_half(world, obj, rot, site_rot)
+            span = CarrySpan(step.side, site_rot.T @ rot, site_rot.T @ (com - site_pos), half)
+            span.add(t_now, rot, com, not holding)
+            holding[step.side] = (span, g)
+            problem.spans.append((span, g))
+        elif step.kind == "release" and step.side in holding:
+            del holding[step.side]
+    return problem
+
+
+# --- critical masses and the probability ---------------------------------------------------
+
+
+def _span_moments(
+    span: CarrySpan, g: Grip, offsets: FloatArray
+) -> tuple[Patch, FloatArray, FloatArray, FloatArray]:
+    """Per offset: the patch, and per knot the tangential force and grip moment per kg, dt."""
+    force, dt = span.grip_forces()
+    centres = np.tile(span.grasp_centre[[0, 2]], (len(offsets), 1))
+    centres[:, 0] += offsets
+    p = patch(g, centres, span.object_half)
+    lever = centres - p.centre  # (n, 2): COM minus patch centre, site x and z
+    tangential = np.hypot(force[:, 0], force[:, 2])
+    moment = lever[:, 1:2] * force[None, :, 0] - lever[:, 0:1] * force[None, :, 2]  # (r x F)_y
+    return p, tangential, moment, dt
+
+
+def slip_critical_mass(span: CarrySpan, g: Grip, offsets: FloatArray, mu: float) -> FloatArray:
+    """The smallest mass (kg) that slips somewhere on ``span``, per lateral offset (inf: none).
+
+    Ellipsoidal limit surface per knot (Howe & Cutkosky 1996): the load per kg (f_t, tau) slips
+    a mass m when m^2 ((f_t / f_max)^2 + (tau / tau_max)^2) > 1; 0 where the pads miss.
+    """
+    p, tangential, moment, _ = _span_moments(span, g, offsets)
+    alone = np.asarray(span.alone, dtype=bool)
+    f_max, tau_max = hold_capacity(g, p, mu)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = (tangential[None, :] / f_max[:, None]) ** 2 + (moment / tau_max[:, None]) ** 2
+    ratio = np.where(alone[None, :], ratio, 0.0)
+    worst = ratio.max(axis=1) if ratio.shape[1] else np.zeros(len(offsets))
+    with np.errstate(divide="ignore"):
+        out = np.where(worst > 0.0, 1.0 / np.sqrt(worst), np.inf)
+    return np.asarray(np.where(p.touches, out, 0.0), dtype=float)
+
+
+def _tilt_per_kg(miss: ReceiverMiss, g: Grip, offsets: FloatArray, mu: float, per_pad: int = 4) -> FloatArray:
+    """The giver's creep turn about its closing axis per kg of object (rad/kg), per offset."""
+    p, _, moment, dt = _span_moments(miss.giver, g, offsets)
+    compliance = creep_compliance(g, p, mu, per_pad)
+    return np.asarray(-compliance * (moment @ dt), dtype=float)  # the load moment is -(grip moment)
+
+
+def receiver_critical_mass(
+    miss: ReceiverMiss, g: Grip, offsets: FloatArray, mu: float, mass_cap: float, per_pad: int = 4
+) -> FloatArray:
+    """The smallest mass at which the receiver's pads miss the object, per offset (inf: none).
+
+    The face under the receiver moves by the giver's creep turn (Rodrigues) plus the giving
+    arm's sag, both growing with m; it is missed when that motion along the receiver's approach
+    reaches the pads' planned depth. Solved by bisection on m in [0, mass_cap] (the turn is kept
+    below a quarter turn, where the drop grows with it).
+    """
+    tilt = _tilt_per_kg(miss, g, offsets, mu, per_pad)
+    rc = np.tile(miss.receiver_centre, (len(offsets), 1))
+    rc[:, 0] += offsets * miss.lateral_shift
+    lands = patch(miss.receiver, rc, miss.receiver_half).touches
+
+    def drop(m: FloatArray) -> FloatArray:
+        theta = m * tilt
+        move = (
+            np.sin(theta)[:, None] * miss.lever_cross
+            + (1.0 - np.cos(theta))[:, None] * miss.lever_cross2
+            + m[:, None] * miss.sag
+        )
+        return np.asarray(move @ miss.approach, dtype=float)
+
+    with np.errstate(divide="ignore"):
+        hi = np.minimum(mass_cap, np.where(tilt != 0.0, 0.5 * np.pi / np.abs(tilt), mass_cap))
+    lo = np.zeros(len(offsets))
+    reached = drop(hi) >= miss.depth
+    for _ in range(48):
+        mid = 0.5 * (lo + hi)
+        over = drop(mid) >= miss.depth
+        hi = np.where(over, mid, hi)
+        lo = np.where(over, lo, mid)
+    out = np.where(reached, hi, np.inf)
+    if miss.depth <= 0.0:
+        out = np.zeros(len(offsets))
+    return np.asarray(np.where(lands, out, 0.0), dtype=float)
+
+
+def critical_mass(
+    world: World, problem: HoldProblem, offsets: FloatArray, friction_scale: float = 1.0, per_pad: int = 4
+) -> tuple[FloatArray, FloatArray]:
+    """Per lateral offset: the smallest failing mass over every hold and handover, and its cause.
+
+    Returns:
+        (masses (n,), causes (n,) as 0 = a hand slips, 1 = the receiver misses).
+    """
+    geom = world.ids.object_geoms[problem.obj]
+    slip = np.full(len(offsets), np.inf)
+    for span, g in problem.spans:
+        mu = contact_parameters(world.model, g.pads[0], geom, friction_scale).mu
+        slip = np.minimum(slip, slip_critical_mass(span, g, offsets, mu))
+    miss = np.full(len(offsets), np.inf)
+    for m in problem.misses:
+        g = next(gr for sp, gr in problem.spans if sp is m.giver)
+        mu = contact_parameters(world.model, g.pads[0], geom, friction_scale).mu
+        miss = np.minimum(miss, receiver_critical_mass(m, g, offsets, mu, 20.0 * problem.mass, per_pad))
+    return np.minimum(slip, miss), (miss < slip).astype(float)
+
+
+def exceed_mass_probability(critical: FloatArray, mass: float, sigma: float) -> FloatArray:
+    """P(m >= critical) for m = mass max(0.2, 1 + sigma z), z ~ N(0, 1) (the truth sampler's law)."""
+    ratio = np.asarray(critical, dtype=float) / mass
+    if sigma <= 0.0:
+        return np.asarray(ratio <= 1.0, dtype=float)
+    with np.errstate(invalid="ignore"):
+        p = ndtr(-(ratio - 1.0) / sigma)
+    return np.asarray(np.where(ratio <= SCALE_FLOOR, 1.0, np.where(np.isinf(ratio), 0.0, p)), dtype=float)
+
+
+def hold_probability(
+    world: World, problem: HoldProblem, uncertainty: Uncertainty, order: int = 16
+) -> tuple[float, float]:
+    """P(hold failure) over mass, friction and lateral offset, and the receiver-miss share of it.
+
+    Gauss-Hermite over the lateral offset (``order`` nodes; one when its sigma is 0) and over the
+    friction factor (when the object's friction reaches the contacts), closed form in the mass.
+    """
+    if uncertainty.object_position > 0.0:
+        z, we = gauss_hermite_normal(order)
+        offsets = uncertainty.object_position * z
+    else:
+        offsets, we = np.zeros(1), np.ones(1)
+    blind = all(g.pad_friction_wins for _, g in problem.spans)
+    if uncertainty.friction > 0.0 and not blind:
+        zf, wf = gauss_hermite_normal(max(4, order // 2))
+        scales = np.maximum(SCALE_FLOOR, 1.0 + uncertainty.friction * zf)
+    else:
+        scales, wf = np.ones(1), np.ones(1)
+    aligned = aligned_probability(problem, uncertainty.object_yaw_rad)
+    total, missed = 0.0, 0.0
+    for per_pad, wa in ((4, aligned), (2, 1.0 - aligned)):
+        if wa <= 0.0:
+            continue
+        for s, w in zip(scales, wf, strict=True):
+            crit, cause = critical_mass(world, problem, offsets, float(s), per_pad)
+            p = exceed_mass_probability(crit, problem.mass, uncertainty.object_mass)
+            total += float(wa * w * (we @ p))
+            missed += float(wa * w * (we @ (p * cause)))
+    return float(np.clip(total, 0.0, 1.0)), float(np.clip(missed, 0.0, 1.0))
+
+
+def aligned_probability(problem: HoldProblem, yaw_sigma: float) -> float:
+    """P(the first grip's pads lie flat on the object): |yaw error| < r / (2 h_x).
+
+    A face turned by psi against the pad differs in depth by 2 h_x psi across the patch
+    width 2 h_x; once that exceeds the resting penetration r the far edge lifts off and
+    MuJoCo's box-box collision keeps the 2 contacts of one edge instead of the 4 corners (the
+    jaws do not square the object up). The yaw error is N(0, yaw_sigma^2).
+    """
+    if not problem.spans:
+        return 1.0
+    span, g = problem.spans[0]
+    if yaw_sigma <= 0.0:
+        return 1.0
+    p = patch(g, span.grasp_centre[[0, 2]][None, :], span.object_half)
+    width = 2.0 * float(p.half[0, 0])
+    if width <= 0.0:
+        return 1.0
+    _, r = contact_impedance(g.contact, g.inv_weight, g.force / 4.0)
+    return float(2.0 * ndtr(r / width / yaw_sigma) - 1.0)
+
+
+def _nominal_facts(world: World, problem: HoldProblem) -> dict[str, float | str]:
+    """Scalar facts of the nominal truth (no offset, nominal friction) for the report."""
+    zero = np.zeros(1)
+    facts: dict[str, float | str] = {"hold_mass_kg": problem.mass}
+    for per_pad, name in ((4, "flat"), (2, "edge")):
+        crit, cause = critical_mass(world, problem, zero, 1.0, per_pad)
+        facts[f"hold_critical_mass_{name}_kg"] = float(crit[0])
+        facts[f"hold_critical_cause_{name}"] = "receiver_misses" if cause[0] else "slip"
+    if problem.spans:
+        g = problem.spans[0][1]
+        facts["hold_grip_force_n"] = g.force
+        facts["hold_contact_mu"] = g.contact.mu
+    for miss in problem.misses:
+        g = next(gr for sp, gr in problem.spans if sp is miss.giver)
+        for per_pad, name in ((4, "flat"), (2, "edge")):
+            tilt = float(_tilt_per_kg(miss, g, zero, g.contact.mu, per_pad)[0]) * problem.mass
+            facts[f"handover_tilt_{name}_deg"] = float(np.degrees(tilt))
+        facts["handover_sag_m"] = float(problem.mass * (miss.sag @ miss.approach))
+        facts["handover_receiver_depth_m"] = miss.depth
+    return facts
+
+
+def assess_hold(world: World, plan: object, risk_config: RiskConfig, uncertainty: Uncertainty) -> RiskReport:
+    """Hold risk of a planned alternative: a hand's grip slips, or a handover's receiver misses.
+
+    Args:
+        world: the estimate world the plan was made on (its object mass is the estimate).
+        plan: an :class:`executive.composition.AlternativePlan`.
+        risk_config: the scenario's risk settings (severity of a drop).
+        uncertainty: the scenario's 1-sigma errors (object_mass, friction, object_position).
+
+    Returns:
+        A report of mode "hold": probability, Fréchet bounds of its two causes, and details
+        (critical mass, grip force, contact friction, handover tilt and sag, the cause). A hand
+        the model does not cover gives probability 0 with bounds (0, 1) and the reason in
+        ``details["hold_model"]``.
+    """
+    severity = risk_config.severity.drop
+    try:
+        problem = hold_problem(world, plan)
+    except HoldModelUnavailable as exc:
+        details: dict[str, float | str] = {"hold_model": f"unavailable: {exc}"}
+        return RiskReport("hold", 0.0, (0.0, 1.0), severity, 0.0, details=details)
+    p, missed = hold_probability(world, problem, uncertainty)
+    details = {"hold_model": "parallel jaw", **_nominal_facts(world, problem)}
+    details["hold_probability"] = p
+    details["hold_receiver_miss_probability"] = missed
+    return RiskReport("hold", p, (p, p), severity, p, details=details)
