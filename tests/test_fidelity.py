@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from executive.cli import main
+from executive.fidelity import with_rollouts
 from executive.regret import (
     TrialTable,
     newcombe_interval,
@@ -231,6 +232,13 @@ def test_newcombe_interval_covers_the_paired_difference() -> None:
     assert 0.93 <= hits / reps <= 0.985
 
 
+def test_rollouts_are_set_on_the_variant(base: Scenario) -> None:
+    on = with_rollouts(base, 6).risk.rollouts
+    assert on.count == 6 and on.min_count <= 6
+    assert with_rollouts(base, 0).risk.rollouts.count == 0
+    assert with_rollouts(base, 6).scene == base.scene
+
+
 # --- end to end ---------------------------------------------------------------------------------
 
 
@@ -269,6 +277,7 @@ def test_fidelity_end_to_end_in_physics(tmp_path: Path) -> None:
     assert summary["trials_executed"] == executed == summary["pooled"]["any"]["trials"]
     assert (out / "table.md").is_file() and (out / "reliability.png").is_file() == (executed > 0)
     assert main(argv) == 2  # the folder holds a suite: --resume or another --out
+    assert main([*argv, "--resume", "--rollouts", "4"]) == 2  # not the suite's rollouts
     assert main([*argv, "--resume"]) == 0
     again = json.loads((out / "summary.json").read_text())
     assert [v["regret"] for v in again["per_variant"]] == [v["regret"] for v in summary["per_variant"]]
