@@ -30,6 +30,7 @@ import py_trees
 from numpy.typing import NDArray
 
 from executive.errors import ExecutiveError
+from executive.grasp_geometry import check_grasp
 from executive.planning import HandTarget, Planner, PlanningError, Trajectory
 from executive.planning_types import site_quat
 from executive.scenario_types import ALTERNATIVES, TransferTask
@@ -40,6 +41,7 @@ __all__ = [
     "CompositionConfig",
     "Step",
     "build_subtree",
+    "check_grasps",
     "plan_alternative",
     "transfer_steps",
 ]
@@ -462,9 +464,14 @@ def plan_alternative(
 ) -> AlternativePlan:
     """Plan every motion step of an alternative in order, each from where the previous ended.
 
-    Raises :class:`executive.planning.PlanningError` naming the step that cannot be reached.
+    Raises :class:`executive.planning.PlanningError` naming the step that cannot be reached,
+    or (:class:`executive.grasp_geometry.GraspGeometryError`, before any planning) the grasp
+    the hand cannot make: an object wider than the jaw opening, or too thin for the fingers
+    to get round it above the table.
     """
-    steps = transfer_steps(world, task, alternative, config)
+    cfg = config or CompositionConfig()
+    steps = transfer_steps(world, task, alternative, cfg)
+    check_grasps(world, steps, planner.config.table_distance, cfg.grip_depth)
     q = np.array(world.home_qpos() if q_start is None else q_start, dtype=float)
     trajectories: dict[str, Trajectory] = {}
     for step in steps:
@@ -481,6 +488,34 @@ def plan_alternative(
         trajectories[step.name] = traj
         q = traj.qpos[-1]
     return AlternativePlan(alternative, task, tuple(steps), trajectories)
+
+
+def check_grasps(world: World, steps: list[Step], table_clearance: float, grip_depth: float) -> None:
+    """The grasp geometry of every grasp of an alternative (:func:`executive.grasp_geometry.check_grasp`).
+
+    The first grasp takes the object off the table: its site height above the table top is the
+    approach's target; later grasps (a handover) are in the air, checked for width only.
+
+    Raises:
+        GraspGeometryError: the first grasp the hand cannot make, with the reason.
+    """
+    table = world.scenario.scene.table.height
+    on_table = True
+    for i, step in enumerate(steps):
+        if step.kind != "grasp":
+            continue
+        approach = next(s for s in reversed(steps[:i]) if s.side == step.side and s.targets)
+        site = next(t for t in approach.targets if t.side == step.side)
+        check_grasp(
+            world,
+            step.side,
+            step.obj,
+            motion=approach.name,
+            site_above_table=float(site.position[2]) - table if on_table else None,
+            table_clearance=table_clearance,
+            grip_depth=grip_depth,
+        )
+        on_table = False
 
 
 def build_subtree(plan: AlternativePlan, *, guard: bool = False) -> py_trees.composites.Sequence:

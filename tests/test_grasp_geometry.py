@@ -1,0 +1,107 @@
+"""Grasp geometry as named reasons (executive/grasp_geometry.py).
+
+References: the gripper's slide positions (``grasp_tolerance``'s jaw opening) against rays cast
+at the model's open hand; the humanoid MJCF's finger numbers; the whole-body IK itself, which
+stops short of the approach to an object the check calls too thin, by the missing thickness.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+import executive.composition as composition
+from executive.composition import plan_alternative
+from executive.grasp_geometry import GraspGeometryError, hand_geometry, min_thickness
+from executive.planning import Planner, PlanningError
+from executive.risk.grasp import grasp_tolerance
+from executive.scenario import load, loads
+from executive.world import World, build
+
+REPO = Path(__file__).resolve().parents[1]
+SCENARIOS = REPO / "scenarios"
+BOOK_SIZE = "size: [0.22, 0.11, 0.05]"
+
+
+def _book(size: str) -> World:
+    text = (SCENARIOS / "book_transfer.yaml").read_text()
+    assert BOOK_SIZE in text
+    return build(loads(text.replace(BOOK_SIZE, f"size: {size}"), source="book.yaml", base_dir=SCENARIOS))
+
+
+@pytest.fixture(scope="module")
+def world() -> World:
+    return build(load("book_transfer"))
+
+
+def test_measured_hand_matches_the_gripper_and_the_mjcf(world: World) -> None:
+    for side in ("left", "right"):
+        geometry = hand_geometry(world, side)
+        # The slide jaws' open and closed positions (grasp_tolerance's opening): closing = (o - w) / 2.
+        tol = grasp_tolerance(world, side, "book")
+        assert geometry.jaw_opening == pytest.approx(2.0 * tol.closing + 0.11, abs=1e-9)
+        # humanoid.xml: pads end 0.025 + 0.065 + 0.03 = 0.12 m from the palm, the site 0.10 m.
+        assert geometry.finger_depth == pytest.approx(0.02, abs=1e-9)
+
+
+def test_min_thickness_closed_form() -> None:
+    # Site 1 cm under the top, fingers 2 cm past it, 1 cm off the table: 2 + 1 + 1 = 4 cm.
+    assert min_thickness(0.02, 0.01, 0.01) == pytest.approx(0.04)
+    # Short fingers: the site stops at the centre of a thin object, t / 2 = 0.5 + 0.5 cm.
+    assert min_thickness(0.005, 0.005, 0.02) == pytest.approx(0.02)
+
+
+def test_too_wide_object_is_refused_by_name() -> None:
+    wide = _book("[0.22, 0.18, 0.05]")
+    for alternative in ("left", "right", "left_to_right"):
+        with pytest.raises(GraspGeometryError) as info:
+            plan_alternative(Planner(wide), wide, wide.scenario.mission[0], alternative)
+        message = str(info.value)
+        assert "the 18 cm 'book' is wider than the 17 cm jaw opening" in message, message
+    assert isinstance(info.value, PlanningError)
+
+
+def test_too_thin_object_is_refused_by_name_and_the_ik_agrees(monkeypatch: pytest.MonkeyPatch) -> None:
+    thin = _book("[0.22, 0.11, 0.03]")
+    task = thin.scenario.mission[0]
+    with pytest.raises(GraspGeometryError) as info:
+        plan_alternative(Planner(thin), thin, task, "left")
+    message = str(info.value)
+    print(message)
+    assert "the 3 cm 'book' is thinner than the 4 cm the fingers need above the table" in message
+    # Without the check, the IK stops short of the approach by the missing centimetre (within its
+    # position tolerance): the table clearance holds the fingertips up.
+    monkeypatch.setattr(composition, "check_grasps", lambda *args, **kwargs: None)
+    planner = Planner(thin)
+    with pytest.raises(PlanningError) as ik:
+        plan_alternative(planner, thin, task, "left")
+    print(ik.value)
+    assert ik.value.name == "left.approach"
+    missing = 0.04 - 0.03
+    assert ik.value.position_error == pytest.approx(missing, abs=planner.config.position_tolerance + 1e-3)
+
+
+def test_object_at_the_limit_plans(world: World) -> None:
+    exact = _book("[0.22, 0.11, 0.04]")
+    plan = plan_alternative(Planner(exact), exact, exact.scenario.mission[0], "left")
+    assert "left.approach" in plan.trajectories
+
+
+def test_g1_dex3_opening_is_measured_on_its_open_hand(g1_scenario_yaml: str) -> None:
+    """The Dex3 has no slide jaws: its opening is the rays' span between thumb and fingers."""
+    g1 = build(loads(g1_scenario_yaml, source="g1_book_transfer.yaml"))
+    with pytest.raises(ValueError):
+        grasp_tolerance(g1, "left", "book")  # its jaw-opening logic is for slide jaws only
+    for side in ("left", "right"):
+        geometry = hand_geometry(g1, side)
+        print(side, geometry)
+        # The profile's site sits between the open thumb and fingers, the 9 cm book fits with
+        # room for the approach, and the fingertips keep clear of the table under a 4 cm book.
+        assert 0.09 < geometry.jaw_opening < 0.20
+        assert 0.0 < geometry.finger_depth < 0.03 - 0.01
+    wide = build(
+        loads(g1_scenario_yaml.replace("0.14, 0.09, 0.04", "0.14, 0.16, 0.04"), source="g1_wide.yaml")
+    )
+    with pytest.raises(GraspGeometryError, match="the 16 cm 'book' is wider than the 15 cm jaw opening"):
+        plan_alternative(Planner(wide), wide, wide.scenario.mission[0], "left")
