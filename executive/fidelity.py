@@ -295,6 +295,7 @@ def variant_statistics(
                 "failures": a["failures"]["any"],
                 "failure_rate": a["failure_rate"]["value"],
                 "ci95": a["failure_rate"]["ci95"],
+                "infeasible_because": _commonest_reason(records, a["name"]),
             }
         )
     ran = [a for a in alternatives if a["trials"]]
@@ -315,6 +316,23 @@ def variant_statistics(
         "regret": result.as_dict(),
         "status": status,
     }
+
+
+def _commonest_reason(records: Sequence[dict[str, Any]], alternative: str) -> str | None:
+    """The planner's commonest reason (numbers aside) why ``alternative`` did not plan; an example."""
+    import re
+    from collections import Counter
+
+    details = [
+        r["failure"]["detail"]
+        for r in records
+        if r["alternative"] == alternative and r["outcome"] == "infeasible" and r.get("failure")
+    ]
+    if not details:
+        return None
+    shapes = Counter(re.sub(r"[-+]?\d[\d.e-]*", "#", d) for d in details)
+    commonest = shapes.most_common(1)[0][0]
+    return next(d for d in details if re.sub(r"[-+]?\d[\d.e-]*", "#", d) == commonest)
 
 
 def pooled_statistics(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
@@ -507,6 +525,12 @@ def _footer(summary: dict[str, Any]) -> list[str]:
         f"{summary['variants_run']} variant(s), {summary['redraws']} invalid scene(s) redrawn, "
         f"{summary['all_infeasible_variants']} with no feasible alternative; "
         f"{summary['trials_executed']} trials in physics; wall time {summary['wall_s']:.0f} s",
+        *[
+            f"variant {v['index']}, {a['name']} never planned, e.g.: {a['infeasible_because']}"
+            for v in summary["per_variant"]
+            for a in v["alternatives"]
+            if not a["trials"] and a["infeasible_because"]
+        ],
     ]
 
 
