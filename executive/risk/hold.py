@@ -391,6 +391,7 @@ class CarrySpan:
     rotations: list[FloatArray] = field(default_factory=list)  # object rotation per knot
     positions: list[FloatArray] = field(default_factory=list)  # object COM per knot
     alone: list[bool] = field(default_factory=list)
+    _forces: tuple[FloatArray, FloatArray] | None = field(default=None, repr=False)
 
     def add(self, t: float, rotation: FloatArray, position: FloatArray, alone: bool) -> None:
         if self.times and t <= self.times[-1] + 1e-9:
@@ -402,6 +403,11 @@ class CarrySpan:
 
     def grip_forces(self) -> tuple[FloatArray, FloatArray]:
         """Per knot, the grip force per unit mass a - g in the site frame (K, 3), and dt weights."""
+        if self._forces is None or len(self._forces[0]) != len(self.times):
+            self._forces = self._compute_forces()
+        return self._forces
+
+    def _compute_forces(self) -> tuple[FloatArray, FloatArray]:
         t = np.asarray(self.times)
         pos = np.asarray(self.positions).reshape(-1, 3)
         if len(t) >= 3:
@@ -414,7 +420,7 @@ class CarrySpan:
         return force, dt
 
 
-@dataclass(frozen=True)
+@dataclass
 class ReceiverMiss:
     """A handover's receiver closing its jaws on the object the giver holds.
 
@@ -423,10 +429,12 @@ class ReceiverMiss:
     lever_cross / lever_cross2: y x r and y x (y x r) (world) for r from the giver's patch centre
     to the receiver's site, y the giver's closing axis (Rodrigues: the point moves by
     sin(t) y x r + (1 - cos t) y x (y x r) when the object turns t about y);
-    approach: the receiver's approach axis (world); sag: the giver hand's servo sag per kg
-    (world, m/kg); receiver: the receiver's grip; receiver_centre: the object's centre in the
-    receiver's site frame (plan); lateral_shift: how much of the object's lateral error along
-    the giver's x shows along the receiver's x; closing_s: the receiver's closing time.
+    approach: the receiver's approach axis (world); sag: how far the object's point under the
+    receiver moves per kg held, by the giving arm's servo compliance (world, m/kg); receiver:
+    the receiver's grip; receiver_centre: the object's centre in the receiver's site frame
+    (plan); lateral_shift: how much of the object's lateral error along the giver's x shows
+    along the receiver's x; closing_s: the receiver's closing time; receiver_span: the
+    receiver's own hold (set once the walk reaches it).
     """
 
     giver: CarrySpan
@@ -440,31 +448,48 @@ class ReceiverMiss:
     receiver_half: FloatArray
     lateral_shift: float
     closing_s: float
+    receiver_span: CarrySpan | None = None
 
 
-def servo_sag(world: World, qpos: FloatArray, side: str) -> FloatArray:
-    """World displacement of the ``side`` hand site per kg held: J Kp^-1 J^T g (position servos).
+def servo_sag(
+    world: World, qpos: FloatArray, side: str, load_point: FloatArray, probe_point: FloatArray
+) -> FloatArray:
+    """Displacement (world, m per kg) of a point held by the ``side`` hand under a held weight.
 
-    The servos do not feed the held object's weight forward, so it bends each servoed joint by
-    tau / kp (a stiffness model of position servos); dofs without a servo are taken as rigid.
+    The servos do not feed the held object's weight forward, so the weight m g at
+    ``load_point`` (the object's COM) bends each servoed joint by tau / kp (a stiffness model
+    of position servos): dq = Kp^-1 J_load^T m g, and a point rigidly held by the hand moves
+    by J_probe dq, which includes the hand's turn under the weight's moment. Dofs without a
+    servo and the gripper's own (force-saturated) slides are taken as rigid.
+
+    Args:
+        world: the world (its model); qpos: the configuration.
+        side: the holding hand.
+        load_point: world point where the weight acts; probe_point: world point to follow.
+
+    Returns:
+        (3,) the probe point's displacement per kg of held mass.
     """
     model = world.model
     data = mujoco.MjData(model)
     data.qpos[:] = qpos
     mujoco.mj_kinematics(model, data)
     mujoco.mj_comPos(model, data)
-    jac = np.zeros((3, model.nv))
-    mujoco.mj_jacSite(model, data, jac, None, world.ids.hand_sites[side])
+    body = int(model.site_bodyid[world.ids.hand_sites[side]])
+    jac_load, jac_probe = np.zeros((3, model.nv)), np.zeros((3, model.nv))
+    mujoco.mj_jac(model, data, jac_load, None, np.asarray(load_point, dtype=float), body)
+    mujoco.mj_jac(model, data, jac_probe, None, np.asarray(probe_point, dtype=float), body)
+    grippers = {a for acts in world.ids.gripper_actuators.values() for a in acts}
     compliance = np.zeros(model.nv)
     for a in range(model.nu):
-        if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT:
+        if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT or a in grippers:
             continue
         joint = int(model.actuator_trnid[a, 0])
         kp = float(model.actuator_gainprm[a, 0])
         kind = int(model.jnt_type[joint])
         if kind in (int(mujoco.mjtJoint.mjJNT_HINGE), int(mujoco.mjtJoint.mjJNT_SLIDE)) and kp > 0:
             compliance[model.jnt_dofadr[joint]] = 1.0 / kp
-    return np.asarray(jac @ (compliance * (jac.T @ GRAVITY)), dtype=float)
+    return np.asarray(jac_probe @ (compliance * (jac_load.T @ GRAVITY)), dtype=float)
 
 
 @dataclass
@@ -529,7 +554,7 @@ def _receiver_miss(
         lever_cross=np.cross(axis, lever),
         lever_cross2=np.cross(axis, np.cross(axis, lever)),
         approach=rec_rot[:, 2].copy(),
-        sag=servo_sag(world, qpos, g.side),
+        sag=servo_sag(world, qpos, g.side, com, rec_pos),
         receiver=receiver,
         receiver_centre=rec_centre[[0, 2]],
         receiver_half=rec_half,
@@ -582,6 +607,8 @@ def hold_problem(world: World, plan: object, closing_s: float = 0.5) -> HoldProb
             span = CarrySpan(step.side, site_rot.T @ rot, site_rot.T @ (com - site_pos), half)
             span.add(t_now, rot, com, not holding)
             holding[step.side] = (span, g)
+            if problem.misses and problem.misses[-1].receiver_span is None and len(holding) > 1:
+                problem.misses[-1].receiver_span = span
             problem.spans.append((span, g))
         elif step.kind == "release" and step.side in holding:
             del holding[step.side]
@@ -592,12 +619,17 @@ def hold_problem(world: World, plan: object, closing_s: float = 0.5) -> HoldProb
 
 
 def _span_moments(
-    span: CarrySpan, g: Grip, offsets: FloatArray
+    span: CarrySpan, g: Grip, offsets: FloatArray, z_shift: FloatArray | None = None
 ) -> tuple[Patch, FloatArray, FloatArray, FloatArray]:
-    """Per offset: the patch, and per knot the tangential force and grip moment per kg, dt."""
+    """Per offset: the patch, and per knot the tangential force and grip moment per kg, dt.
+
+    z_shift: (n,) how much farther along the approach the object sits in the hand than planned.
+    """
     force, dt = span.grip_forces()
     centres = np.tile(span.grasp_centre[[0, 2]], (len(offsets), 1))
     centres[:, 0] += offsets
+    if z_shift is not None:
+        centres[:, 1] += z_shift
     p = patch(g, centres, span.object_half)
     lever = centres - p.centre  # (n, 2): COM minus patch centre, site x and z
     tangential = np.hypot(force[:, 0], force[:, 2])
@@ -605,13 +637,16 @@ def _span_moments(
     return p, tangential, moment, dt
 
 
-def slip_critical_mass(span: CarrySpan, g: Grip, offsets: FloatArray, mu: float) -> FloatArray:
+def slip_critical_mass(
+    span: CarrySpan, g: Grip, offsets: FloatArray, mu: float, z_shift: FloatArray | None = None
+) -> FloatArray:
     """The smallest mass (kg) that slips somewhere on ``span``, per lateral offset (inf: none).
 
     Ellipsoidal limit surface per knot (Howe & Cutkosky 1996): the load per kg (f_t, tau) slips
     a mass m when m^2 ((f_t / f_max)^2 + (tau / tau_max)^2) > 1; 0 where the pads miss.
+    z_shift: see :func:`_span_moments` (a handed-over object the receiver took lower).
     """
-    p, tangential, moment, _ = _span_moments(span, g, offsets)
+    p, tangential, moment, _ = _span_moments(span, g, offsets, z_shift)
     alone = np.asarray(span.alone, dtype=bool)
     f_max, tau_max = hold_capacity(g, p, mu)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -633,12 +668,14 @@ def _tilt_per_kg(miss: ReceiverMiss, g: Grip, offsets: FloatArray, mu: float, pe
 def receiver_critical_mass(
     miss: ReceiverMiss, g: Grip, offsets: FloatArray, mu: float, mass_cap: float, per_pad: int = 4
 ) -> FloatArray:
-    """The smallest mass at which the receiver's pads miss the object, per offset (inf: none).
+    """The smallest mass at which the handover fails, per offset (inf: none).
 
     The face under the receiver moves by the giver's creep turn (Rodrigues) plus the giving
-    arm's sag, both growing with m; it is missed when that motion along the receiver's approach
-    reaches the pads' planned depth. Solved by bisection on m in [0, mass_cap] (the turn is kept
-    below a quarter turn, where the drop grows with it).
+    arm's sag, both growing with m; the receiver misses when that motion along its approach
+    reaches the pads' planned depth, and it loses the object later when its shallower patch
+    slips on its own carry (:func:`slip_critical_mass` with the object that much lower). Solved
+    by bisection on m in [0, mass_cap] (the turn is kept below a quarter turn, where the drop
+    grows with it).
     """
     tilt = _tilt_per_kg(miss, g, offsets, mu, per_pad)
     rc = np.tile(miss.receiver_centre, (len(offsets), 1))
@@ -657,10 +694,20 @@ def receiver_critical_mass(
     with np.errstate(divide="ignore"):
         hi = np.minimum(mass_cap, np.where(tilt != 0.0, 0.5 * np.pi / np.abs(tilt), mass_cap))
     lo = np.zeros(len(offsets))
-    reached = drop(hi) >= miss.depth
+    rec = miss.receiver_span
+    rec_offsets = offsets * miss.lateral_shift
+
+    def fails(m: FloatArray) -> NDArray[np.bool_]:
+        sink = drop(m)
+        out = sink >= miss.depth
+        if rec is not None:
+            out |= m >= slip_critical_mass(rec, miss.receiver, rec_offsets, mu, np.maximum(sink, 0.0))
+        return np.asarray(out)
+
+    reached = fails(hi)
     for _ in range(48):
         mid = 0.5 * (lo + hi)
-        over = drop(mid) >= miss.depth
+        over = fails(mid)
         hi = np.where(over, mid, hi)
         lo = np.where(over, lo, mid)
     out = np.where(reached, hi, np.inf)
@@ -675,7 +722,7 @@ def critical_mass(
     """Per lateral offset: the smallest failing mass over every hold and handover, and its cause.
 
     Returns:
-        (masses (n,), causes (n,) as 0 = a hand slips, 1 = the receiver misses).
+        (masses (n,), causes (n,) as 0 = a hand slips, 1 = a handover fails).
     """
     geom = world.ids.object_geoms[problem.obj]
     slip = np.full(len(offsets), np.inf)
@@ -760,7 +807,7 @@ def _nominal_facts(world: World, problem: HoldProblem) -> dict[str, float | str]
     for per_pad, name in ((4, "flat"), (2, "edge")):
         crit, cause = critical_mass(world, problem, zero, 1.0, per_pad)
         facts[f"hold_critical_mass_{name}_kg"] = float(crit[0])
-        facts[f"hold_critical_cause_{name}"] = "receiver_misses" if cause[0] else "slip"
+        facts[f"hold_critical_cause_{name}"] = "handover" if cause[0] else "slip"
     if problem.spans:
         g = problem.spans[0][1]
         facts["hold_grip_force_n"] = g.force
