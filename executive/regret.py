@@ -27,7 +27,9 @@ McNemar test (McNemar 1947): under no difference, the trials where only the choi
 failed and those where only the best failed are equally likely, so their split is
 Binomial(n_discordant, 1/2); p = min(1, 2 P(X <= min)). The interval is Newcombe's
 hybrid score interval for a difference of paired proportions (Newcombe 1998,
-method 10), from Wilson score intervals (Wilson 1927).
+method 10), from Wilson score intervals (Wilson 1927). The interval is approximate; with
+few discordant trials it can exclude 0 where the exact test does not, so significance is
+the test's.
 """
 
 from __future__ import annotations
