@@ -256,9 +256,15 @@ def test_bad_input_exits_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -
 
 
 def test_fidelity_end_to_end_in_physics(tmp_path: Path) -> None:
+    """One variant, then --resume extends the suite to two: the first is not run again."""
     out = tmp_path / "suite"
-    argv = ["fidelity", "book_transfer", "--variants", "2", "--trials", "2", "--jobs", "1", "--out", str(out)]
-    assert main(argv) == 0
+    argv = ["fidelity", "book_transfer", "--trials", "2", "--jobs", "1", "--out", str(out)]
+    assert main([*argv, "--variants", "1"]) == 0
+    first = (out / "variant-00" / "trials.jsonl").read_bytes()
+    assert main([*argv, "--variants", "2"]) == 2  # the folder holds a suite: --resume or another --out
+    assert main([*argv, "--variants", "2", "--resume", "--rollouts", "4"]) == 2  # not the suite's rollouts
+    assert main([*argv, "--variants", "2", "--resume"]) == 0
+    assert (out / "variant-00" / "trials.jsonl").read_bytes() == first
     summary = json.loads((out / "summary.json").read_text())
     assert summary["complete"] and summary["variants_run"] == 2 and summary["rollouts"] == 0
     assert set(summary["pooled"]) == {"collision", "fall", "drop", "any"}
@@ -276,8 +282,3 @@ def test_fidelity_end_to_end_in_physics(tmp_path: Path) -> None:
         assert {"regret", "ci95", "p_value", "naive_regret"} <= set(row["regret"])
     assert summary["trials_executed"] == executed == summary["pooled"]["any"]["trials"]
     assert (out / "table.md").is_file() and (out / "reliability.png").is_file() == (executed > 0)
-    assert main(argv) == 2  # the folder holds a suite: --resume or another --out
-    assert main([*argv, "--resume", "--rollouts", "4"]) == 2  # not the suite's rollouts
-    assert main([*argv, "--resume"]) == 0
-    again = json.loads((out / "summary.json").read_text())
-    assert [v["regret"] for v in again["per_variant"]] == [v["regret"] for v in summary["per_variant"]]
