@@ -30,15 +30,18 @@ import hashlib
 import json
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import IO, Any
+from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
 from executive.errors import ExecutiveError
 from executive.scenario_types import Scenario
+
+if TYPE_CHECKING:
+    from executive.variants import Variant
 
 __all__ = [
     "FidelityResult",
@@ -178,7 +181,7 @@ def run_fidelity(
     return _run_variants(scenario, document, folder, config, jobs, log)
 
 
-def _logger(stream: IO[str] | None) -> Any:
+def _logger(stream: IO[str] | None) -> Callable[[str], None]:
     import sys
 
     out = stream if stream is not None else sys.stdout
@@ -191,7 +194,12 @@ def _logger(stream: IO[str] | None) -> Any:
 
 
 def _run_variants(
-    scenario: Scenario, document: dict[str, Any], folder: Path, config: dict[str, Any], jobs: int, log: Any
+    scenario: Scenario,
+    document: dict[str, Any],
+    folder: Path,
+    config: dict[str, Any],
+    jobs: int,
+    log: Callable[[str], None],
 ) -> FidelityResult:
     """Draw, write and run each variant's campaign; then the suite's statistics."""
     from executive.campaign import run_campaign
@@ -263,7 +271,7 @@ def _finite(x: float | None) -> float | None:
 
 
 def variant_statistics(
-    variant: Any,
+    variant: Variant,
     label: str,
     campaign: dict[str, Any],
     records: Sequence[dict[str, Any]],
@@ -353,7 +361,9 @@ def pooled_statistics(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, 
     return out
 
 
-def _forecasts(executed: Sequence[dict[str, Any]]) -> Any:
+def _forecasts(
+    executed: Sequence[dict[str, Any]],
+) -> Iterator[tuple[str, str, np.ndarray, np.ndarray]]:
     for mode, key in FORECASTS.items():
         p = np.array([r["predicted"][key] for r in executed], dtype=float)
         y = np.array([r["outcome"] != "success" if mode == "any" else r["outcome"] == mode for r in executed])
