@@ -502,17 +502,28 @@ class HoldProblem:
     misses: list[ReceiverMiss] = field(default_factory=list)
 
 
-def _object_pose(world: World, qpos: FloatArray, obj: str) -> tuple[FloatArray, FloatArray]:
-    """The object's rotation and COM (world) in a configuration ``qpos``."""
+def _object_poses(world: World, qpos: FloatArray, obj: str) -> tuple[FloatArray, FloatArray]:
+    """The object's rotations (K, 3, 3) and COMs (K, 3) in configurations ``qpos`` (K, nq)."""
     adr = world.ids.object_qpos[obj]
-    rot = np.zeros(9)
-    quat = np.asarray(qpos[adr + 3 : adr + 7], dtype=float)
-    mujoco.mju_quat2Mat(rot, quat / np.linalg.norm(quat))
-    r = rot.reshape(3, 3)
-    com = (
-        np.asarray(qpos[adr : adr + 3], dtype=float) + r @ world.model.body_ipos[world.ids.object_bodies[obj]]
-    )
-    return r, com
+    rows = np.atleast_2d(np.asarray(qpos, dtype=float))
+    q = rows[:, adr + 3 : adr + 7]
+    w, x, y, z = (q / np.linalg.norm(q, axis=1, keepdims=True)).T
+    rot = np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)], axis=-1),
+            np.stack([2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)], axis=-1),
+            np.stack([2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)], axis=-1),
+        ],
+        axis=1,
+    )  # unit quaternion (w, x, y, z) to rotation matrix
+    com = rows[:, adr : adr + 3] + rot @ world.model.body_ipos[world.ids.object_bodies[obj]]
+    return rot, com
+
+
+def _object_pose(world: World, qpos: FloatArray, obj: str) -> tuple[FloatArray, FloatArray]:
+    """The object's rotation and COM (world) in one configuration ``qpos``."""
+    rot, com = _object_poses(world, qpos, obj)
+    return rot[0], com[0]
 
 
 def _site_pose(world: World, qpos: FloatArray, side: str) -> tuple[FloatArray, FloatArray]:
@@ -588,10 +599,11 @@ def hold_problem(world: World, plan: object, closing_s: float = 0.5) -> HoldProb
     for step in plan.steps:  # type: ignore[attr-defined]
         traj = trajectories.get(step.name)
         if traj is not None:
-            for k, t in enumerate(traj.times):
-                rot, com = _object_pose(world, traj.qpos[k], obj)
-                for span, _ in holding.values():
-                    span.add(t_now + float(t), rot, com, len(holding) == 1)
+            if holding:
+                rots, coms = _object_poses(world, traj.qpos, obj)
+                for k, t in enumerate(traj.times):
+                    for span, _ in holding.values():
+                        span.add(t_now + float(t), rots[k], coms[k], len(holding) == 1)
             t_now, qpos = t_now + traj.duration, traj.qpos[-1]
         elif step.kind == "grasp" and step.side not in holding:
             rot, com = _object_pose(world, qpos, obj)
@@ -705,7 +717,7 @@ def receiver_critical_mass(
         return np.asarray(out)
 
     reached = fails(hi)
-    for _ in range(48):
+    for _ in range(32):  # mass_cap / 2^32: far below any mass that matters
         mid = 0.5 * (lo + hi)
         over = fails(mid)
         hi = np.where(over, mid, hi)
