@@ -21,7 +21,10 @@ The QP of every IK step (mink's formulation, ``min ||J dq + e||_W^2`` subject to
 * limits: ``ConfigurationLimit``, ``VelocityLimit`` (the joints' velocity limits;
   both as bounds on single dofs, see :class:`~executive.planning_limits.JointBounds`),
   the CoM inside the feet's support polygon shrunk by a margin
-  (:class:`~executive.planning_limits.SupportPolygonLimit`), and collision
+  (:class:`~executive.planning_limits.SupportPolygonLimit`), the robot's safe posture
+  (:mod:`executive.posture`: the torso's tilt, :class:`~executive.planning_limits.TiltLimit`,
+  and the pelvis no lower than its limit below standing,
+  :class:`~executive.planning_limits.PelvisHeightLimit`), and collision
   avoidance (:class:`~executive.planning_limits.GeomPairCollisionLimit`) between
   each arm (and a carried object) and the table, obstacles and other objects,
   between the arms, and between the arms and the rest of the body.
@@ -490,10 +493,11 @@ class Planner:
         return trajectory
 
     def _check_posture(self, trajectory: Trajectory) -> None:
-        """Every knot's pelvis within the safe posture (the QP's limit is first order)."""
+        """Every knot's pelvis within the safe posture (the QP's limit is first order), or no
+        lower than where the move started when it started below it."""
         heights = trajectory.qpos[:, self.base_z_adr]
         k = int(np.argmin(heights))
-        if heights[k] >= self.pelvis_floor:
+        if heights[k] >= min(self.pelvis_floor, float(heights[0])):
             return
         reason = self.posture_limits.describe_drop(self.standing_height - float(heights[k]))
         raise PlanningError(

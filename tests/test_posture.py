@@ -11,6 +11,7 @@ import dataclasses
 import math
 from pathlib import Path
 
+import mink
 import mujoco
 import numpy as np
 import pytest
@@ -22,7 +23,8 @@ from executive.composition import plan_alternative
 from executive.detectors import FailureDetector
 from executive.errors import RobotProfileError
 from executive.execution import SimulatedRobot
-from executive.planning import Planner, PlanningError
+from executive.planning import HandTarget, Planner, PlanningError
+from executive.planning_limits import PelvisHeightLimit
 from executive.planning_timing import Trajectory
 from executive.polygon import signed_margin
 from executive.posture import SafePosture, standing_pelvis_height
@@ -109,6 +111,56 @@ def test_posture_limit_caps_the_pelvis_in_the_plan(turned: World) -> None:
     print(f"capped plan: lowest pelvis {heights.min():.4f} m, standing {standing:.4f} m")
     assert heights.min() >= standing - 0.10
     assert heights.min() < standing - 0.05  # the limit is what holds it (the 5 cm posture refuses it)
+
+
+def test_pelvis_limit_row_against_finite_differences() -> None:
+    """-G dq is the pelvis's rise for a small step dq (mj_integratePos), h the damped gap."""
+    world = build(load("book_transfer"))
+    model = world.model
+    q = world.home_qpos()
+    configuration = mink.Configuration(model)
+    configuration.update(q)
+    z = float(configuration.data.xpos[world.ids.base_body][2])
+    limit = PelvisHeightLimit(model, world.ids.base_body, z - 0.03, gain=0.5, recovery=0.002)
+    constraint = limit.compute_qp_inequalities(configuration, 0.025)
+    assert constraint.G is not None and constraint.h is not None
+    rng = np.random.default_rng(1)
+    for _ in range(5):
+        dq = rng.normal(0.0, 1.0, model.nv)
+        eps = 1e-6
+        moved = q.copy()
+        mujoco.mj_integratePos(model, moved, dq, eps)
+        configuration.update(moved)
+        rise = (float(configuration.data.xpos[world.ids.base_body][2]) - z) / eps
+        assert float(-(constraint.G @ dq)[0]) == pytest.approx(rise, rel=1e-4, abs=1e-6)
+    assert constraint.h[0] == pytest.approx(0.5 * 0.03)
+    # Below its floor: it must rise, by at most the recovery per step.
+    configuration.update(q)
+    below = PelvisHeightLimit(model, world.ids.base_body, z + 0.01, gain=0.5, recovery=0.002)
+    assert below.compute_qp_inequalities(configuration, 0.025).h[0] == pytest.approx(-0.002)
+
+
+def test_a_move_that_starts_squatted_below_the_posture_goes_no_lower() -> None:
+    """A start below the floor (a measured squat, say) is not refused: the pelvis rises from it."""
+    world = build(load("book_transfer"))
+    posture = world.profile.safe_posture
+    standing = standing_pelvis_height(world.model, world.ids.keyframe, world.ids.base_body)
+    q = _squat(world, posture.max_pelvis_drop + 0.02)
+    q[2] -= posture.max_pelvis_drop + 0.02  # the feet back on the floor
+    planner = Planner(world)
+    data = mujoco.MjData(world.model)
+    data.qpos[:] = q
+    mujoco.mj_kinematics(world.model, data)
+    site = world.ids.hand_sites["left"]
+    start = data.site_xpos[site].copy()
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, data.site_xmat[site])
+    target = HandTarget("left", start + np.array([0.05, 0.0, 0.0]), quat)
+    trajectory = planner.move(q, [target], name="left.nudge")
+    heights = trajectory.qpos[:, 2]
+    print(f"start {standing - heights[0]:.4f} m down, lowest {standing - heights.min():.4f} m down")
+    assert heights[0] == pytest.approx(standing - posture.max_pelvis_drop - 0.02, abs=1e-3)
+    assert heights.min() >= heights[0] - 1e-9
 
 
 @pytest.mark.parametrize("alternative", ["left", "right", "left_to_right"])
