@@ -10,24 +10,27 @@ it held (soft contacts creep a little even inside the cone).
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 
 import mujoco
 import numpy as np
 import pytest
 
 from executive.assessment import assess_plan
-from executive.composition import plan_alternative
+from executive.composition import Step, plan_alternative
 from executive.planning import Planner
 from executive.risk.collision import CollisionModel
 from executive.risk.hold import (
     CarrySpan,
     Grip,
+    HoldModelUnavailable,
     aligned_probability,
     assess_hold,
     contact_impedance,
     contact_parameters,
     creep_compliance,
     critical_mass,
+    grip,
     hold_probability,
     hold_problem,
     patch,
@@ -276,3 +279,45 @@ def test_drop_mode_is_the_union_of_grasp_and_hold(heavy: tuple[World, object]) -
     assert drop.probability == pytest.approx(1.0 - (1.0 - pg) * (1.0 - ph), abs=1e-12)
     assert drop.probability_bounds[0] <= drop.probability <= drop.probability_bounds[1]
     assert "drop_reason" in drop.details
+
+
+def test_a_hand_without_parallel_jaws_is_reported_not_modelled(g1_scenario_yaml: str) -> None:
+    # The G1's Dex3 hand closes hinged fingers: no jaw force to read off the model.
+    scenario = loads(g1_scenario_yaml, source="g1_book_transfer.yaml")
+    world = build(scenario)
+    with pytest.raises(HoldModelUnavailable, match="not a parallel jaw"):
+        grip(world, "left", "book", np.array([0.0, 1.0, 0.0]))
+    plan = SimpleNamespace(
+        task=SimpleNamespace(object="book"),
+        steps=(Step("grasp", "left.grasp", "left", obj="book"),),
+        trajectories={},
+    )
+    report = assess_hold(world, plan, scenario.risk, scenario.uncertainty)
+    assert report.probability == 0.0 and report.probability_bounds == (0.0, 1.0)
+    assert str(report.details["hold_model"]).startswith("unavailable")
+
+
+@pytest.mark.parametrize(("priority", "pad_mu", "box_scale"), [(1, 0.8, 2.0), (0, 0.8, 2.0), (0, 1.5, 0.5)])
+def test_contact_friction_is_mixed_as_mujoco_mixes_it(priority: int, pad_mu: float, box_scale: float) -> None:
+    xml = _XML.format(
+        gz=-G, ya=0.055, yb=-0.055, hx=PAD_HALF[0], hz=PAD_HALF[1], mu=pad_mu, dx=0.0,
+        bx=BOX_HALF[0], by=BOX_HALF[1], bz=BOX_HALF[2], m=1.0,
+    )  # fmt: skip
+    xml = xml.replace('priority="1"', f'priority="{priority}"')
+    xml = xml.replace('friction="1 0.01 0.001"', f'friction="{box_scale} 0.01 0.001"')
+    model = mujoco.MjModel.from_xml_string(xml)
+    data = mujoco.MjData(model)
+    data.ctrl[:] = 30.0
+    for _ in range(20):
+        mujoco.mj_step(model, data)
+    pad, box = model.geom("pad_a").id, model.geom("box").id
+    # the box's friction as a truth world scales it: geom friction 1 x box_scale
+    model.geom_friction[box, 0] = 1.0
+    expected = contact_parameters(model, pad, box, friction_scale_b=box_scale)
+    rows = [
+        i for i in range(data.ncon) if {int(data.contact.geom1[i]), int(data.contact.geom2[i])} == {pad, box}
+    ]
+    assert rows
+    for i in rows:
+        assert data.contact.friction[i][0] == pytest.approx(expected.mu)
+        assert data.contact.friction[i][2] == pytest.approx(expected.mu_torsion)
