@@ -19,17 +19,17 @@ humanoid's.
 Usage::
 
     posture = world.profile.safe_posture
-    floor = standing_pelvis_height(world.model, keyframe) - posture.fall_pelvis_drop
+    standing = standing_pelvis_height(world.model, world.ids.keyframe, world.ids.base_body)
+    floor = standing - posture.fall_pelvis_drop  # the fall detector's floor
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import mujoco
 
-__all__ = ["SafePosture", "standing_pelvis_height", "trunk_tilt_deg"]
+__all__ = ["SafePosture", "standing_pelvis_height"]
 
 
 @dataclass(frozen=True)
@@ -50,7 +50,7 @@ class SafePosture:
     tilt_tolerance_deg: float = 10.0
 
     def __post_init__(self) -> None:
-        for name in ("max_pelvis_drop", "pelvis_tolerance", "tilt_tolerance_deg"):
+        for name in ("max_pelvis_drop", "max_trunk_tilt_deg", "pelvis_tolerance", "tilt_tolerance_deg"):
             if not getattr(self, name) >= 0.0:
                 raise ValueError(f"SafePosture.{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 < self.max_trunk_tilt_deg + self.tilt_tolerance_deg < 180.0:
@@ -99,9 +99,3 @@ def standing_pelvis_height(model: mujoco.MjModel, keyframe: int, base_body: int)
     mujoco.mj_resetDataKeyframe(model, data, keyframe)
     mujoco.mj_kinematics(model, data)
     return float(data.xpos[base_body][2])
-
-
-def trunk_tilt_deg(xmat_row_major: object) -> float:
-    """Angle (deg) of a body's z axis from the vertical, from its row-major rotation (9 values)."""
-    zz = float(xmat_row_major[8])  # type: ignore[index]
-    return math.degrees(math.acos(max(-1.0, min(1.0, zz))))

@@ -118,6 +118,7 @@ def profile_from_node(root: Node, base_dir: Path, source_path: Path | None = Non
 
 
 def _safe_posture(node: Node) -> SafePosture:
+    """The ``safe_posture`` mapping: any of SafePosture's fields, the rest its defaults."""
     keys = ("max_pelvis_drop", "max_trunk_tilt_deg", "pelvis_tolerance", "tilt_tolerance_deg")
     node.check_keys(optional=keys)
     values = {}
