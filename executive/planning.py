@@ -333,7 +333,8 @@ class Planner:
             exc.position_error,
             exc.angle_error,
             exc.iterations,
-            f"motion '{name}': reaching the target {self.posture_limits.describe_drop(needed)} "
+            f"motion '{name}': reaching the target needs the pelvis lower than the safe posture "
+            f"allows: planned without that limit it takes {self.posture_limits.describe_drop(needed)} "
             f"(robot '{self.world.profile.name}', safe_posture.max_pelvis_drop); with the pelvis "
             f"held there, {held}",
         ) from exc
@@ -506,7 +507,7 @@ class Planner:
             0.0,
             0.0,
             0,
-            f"motion '{trajectory.name}': the timed path {reason} at t = {trajectory.times[k]:.2f} s",
+            f"motion '{trajectory.name}': at t = {trajectory.times[k]:.2f} s the timed path takes {reason}",
         )
 
     def _routes(

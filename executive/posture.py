@@ -69,17 +69,17 @@ class SafePosture:
         """deg of torso tilt at which the robot has fallen: the posture's limit plus its tolerance."""
         return self.max_trunk_tilt_deg + self.tilt_tolerance_deg
 
-    def describe_drop(self, needed: float) -> str:
-        """A named reason: a motion that needs the pelvis ``needed`` m below standing.
+    def describe_drop(self, depth: float) -> str:
+        """The pelvis ``depth`` m below standing against this posture's limit, for a named reason.
 
         Args:
-            needed: how far below standing (m) the motion would put the pelvis.
+            depth: how far below standing (m) a motion puts the pelvis.
 
         Returns:
-            e.g. "needs the pelvis 17 cm below standing; the safe posture allows 10 cm".
+            e.g. "the pelvis 17 cm below standing; the safe posture allows 5 cm".
         """
         return (
-            f"needs the pelvis {needed * 100:.0f} cm below standing; the safe posture allows "
+            f"the pelvis {depth * 100:.0f} cm below standing; the safe posture allows "
             f"{self.max_pelvis_drop * 100:.0f} cm"
         )
 
