@@ -66,17 +66,20 @@ __all__ = [
     "HoldProblem",
     "Patch",
     "ReceiverMiss",
-    "aligned_probability",
     "assess_hold",
     "contact_parameters",
     "creep_compliance",
+    "creep_tilt_per_kg",
     "critical_mass",
     "grip",
     "hold_capacity",
     "hold_probability",
+    "object_pose_at",
     "patch",
     "servo_sag",
+    "site_pose_at",
     "slip_critical_mass",
+    "squaring_turn",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -207,6 +210,7 @@ class Grip:
     contact: ContactParameters
     inv_weight: float
     impratio: float
+    half_width: float  # m, the object's half width across the jaws
     pad_friction_wins: bool  # the pad's priority is higher: the object's friction never counts
 
 
@@ -292,6 +296,7 @@ def grip(world: World, side: str, obj: str, closing_axis_object: FloatArray) -> 
         contact=contact_parameters(model, pads[0], geom),
         inv_weight=float(model.body_invweight0[body_pad, 0] + model.body_invweight0[body_obj, 0]),
         impratio=float(model.opt.impratio),
+        half_width=width / 2.0,
         pad_friction_wins=bool(wins),
     )
 
@@ -433,8 +438,10 @@ class ReceiverMiss:
     receiver moves per kg held, by the giving arm's servo compliance (world, m/kg); receiver:
     the receiver's grip; receiver_centre: the object's centre in the receiver's site frame
     (plan); lateral_shift: how much of the object's lateral error along the giver's x shows
-    along the receiver's x; closing_s: the receiver's closing time; receiver_span: the
-    receiver's own hold (set once the walk reaches it).
+    along the receiver's x; closing_s: the receiver's closing time; squaring: the giver's turn
+    about its closing axis per radian of yaw squared out of its jaws at most, w / (2 h_z), and
+    patch_half_height its h_z (see :func:`squaring_turn`); receiver_span: the receiver's own
+    hold (set once the walk reaches it).
     """
 
     giver: CarrySpan
@@ -448,6 +455,8 @@ class ReceiverMiss:
     receiver_half: FloatArray
     lateral_shift: float
     closing_s: float
+    squaring: float
+    patch_half_height: float
     receiver_span: CarrySpan | None = None
 
 
@@ -520,13 +529,14 @@ def _object_poses(world: World, qpos: FloatArray, obj: str) -> tuple[FloatArray,
     return rot, com
 
 
-def _object_pose(world: World, qpos: FloatArray, obj: str) -> tuple[FloatArray, FloatArray]:
+def object_pose_at(world: World, qpos: FloatArray, obj: str) -> tuple[FloatArray, FloatArray]:
     """The object's rotation and COM (world) in one configuration ``qpos``."""
     rot, com = _object_poses(world, qpos, obj)
     return rot[0], com[0]
 
 
-def _site_pose(world: World, qpos: FloatArray, side: str) -> tuple[FloatArray, FloatArray]:
+def site_pose_at(world: World, qpos: FloatArray, side: str) -> tuple[FloatArray, FloatArray]:
+    """The ``side`` hand site's position and rotation (world) in a configuration ``qpos``."""
     data = mujoco.MjData(world.model)
     data.qpos[:] = qpos
     mujoco.mj_kinematics(world.model, data)
@@ -546,13 +556,13 @@ def _receiver_miss(
 ) -> ReceiverMiss:
     """The geometry of the receiver ``side`` closing on the object ``giver`` holds at ``qpos``."""
     span, g = giver
-    obj_rot, com = _object_pose(world, qpos, obj)
+    obj_rot, com = object_pose_at(world, qpos, obj)
     giver_rot = obj_rot @ span.grasp_rotation.T
     giver_pos = com - giver_rot @ span.grasp_centre
     half_g = _object_half(world, obj, obj_rot, giver_rot)
     pg = patch(g, span.grasp_centre[[0, 2]][None, :], half_g)
     centre_world = giver_pos + giver_rot @ np.array([pg.centre[0, 0], 0.0, pg.centre[0, 1]])
-    rec_pos, rec_rot = _site_pose(world, qpos, side)
+    rec_pos, rec_rot = site_pose_at(world, qpos, side)
     axis = giver_rot[:, 1]
     lever = rec_pos - centre_world
     rec_half = _object_half(world, obj, obj_rot, rec_rot)
@@ -571,6 +581,8 @@ def _receiver_miss(
         receiver_half=rec_half,
         lateral_shift=float(giver_rot[:, 0] @ rec_rot[:, 0]),
         closing_s=closing_s,
+        squaring=g.half_width / float(pg.half[0, 1]) if pg.half[0, 1] > 0.0 else 0.0,
+        patch_half_height=float(pg.half[0, 1]),
     )
 
 
@@ -606,14 +618,14 @@ def hold_problem(world: World, plan: object, closing_s: float = 0.5) -> HoldProb
                         span.add(t_now + float(t), rots[k], coms[k], len(holding) == 1)
             t_now, qpos = t_now + traj.duration, traj.qpos[-1]
         elif step.kind == "grasp" and step.side not in holding:
-            rot, com = _object_pose(world, qpos, obj)
+            rot, com = object_pose_at(world, qpos, obj)
             t_now += closing_s
             for span, _ in holding.values():
                 span.add(t_now, rot, com, len(holding) == 1)
             if holding:
                 giver = next(iter(holding.values()))
                 problem.misses.append(_receiver_miss(world, qpos, obj, giver, step.side, closing_s))
-            site_pos, site_rot = _site_pose(world, qpos, step.side)
+            site_pos, site_rot = site_pose_at(world, qpos, step.side)
             g = grip(world, step.side, obj, rot.T @ site_rot[:, 1])
             half = _object_half(world, obj, rot, site_rot)
             span = CarrySpan(step.side, site_rot.T @ rot, site_rot.T @ (com - site_pos), half)
@@ -670,32 +682,79 @@ def slip_critical_mass(
     return np.asarray(np.where(p.touches, out, 0.0), dtype=float)
 
 
-def _tilt_per_kg(miss: ReceiverMiss, g: Grip, offsets: FloatArray, mu: float, per_pad: int = 4) -> FloatArray:
-    """The giver's creep turn about its closing axis per kg of object (rad/kg), per offset."""
+def creep_tilt_per_kg(
+    miss: ReceiverMiss, g: Grip, offsets: FloatArray, mu: float
+) -> tuple[FloatArray, FloatArray]:
+    """Per offset: the giver's creep turn about its closing axis per kg (rad/kg), and the
+    weight's moment about that axis per kg at the handover (N m/kg)."""
     p, _, moment, dt = _span_moments(miss.giver, g, offsets)
-    compliance = creep_compliance(g, p, mu, per_pad)
-    return np.asarray(-compliance * (moment @ dt), dtype=float)  # the load moment is -(grip moment)
+    compliance = creep_compliance(g, p, mu)
+    tilt = -compliance * (moment @ dt)  # the load moment is -(grip moment)
+    return np.asarray(tilt, dtype=float), np.asarray(np.abs(moment[:, -1]), dtype=float)
+
+
+def squaring_turn(
+    g: Grip, half_height: float, moment_per_kg: FloatArray, mass: FloatArray, yaw: FloatArray
+) -> FloatArray:
+    """Turn (rad) about the closing axis while a lifted object's yaw error is squared in the jaws.
+
+    Jaws closed on an object resting on the table leave its yaw error (the table holds it);
+    lifted, the jaws' couple squares it, its faces sliding along the pads by |yaw| w/2 on the
+    two edge contacts of each pad (normal force F/2 each). While they slide, the weight's moment
+    M about the closing axis is taken by the contacts' friction, which opposes the generalised
+    slip on MuJoCo's elliptic cone (f_j proportional to mu_j^2 v_j): linearised about the squaring
+    slide, the spin omega gives 4 (F/2) mu_t^2 cos(a) omega / (mu v) of moment, sin(a) = m g /
+    (4 mu F/2) the share of the cone the weight takes. So the turn per yaw is w/2 M mu /
+    (4 (F/2) mu_t^2 cos a), at most w / (2 h_z), where the contacts above and below the patch
+    centre slide apart (kinematic bound; the only way without torsional friction).
+
+    Args:
+        g: the giver's grip; half_height: the patch's half height h_z (m).
+        moment_per_kg: |M| / m per row (N m / kg); mass: kg per row; yaw: rad per row.
+
+    Returns:
+        The turn per row (rad, >= 0).
+    """
+    bound = g.half_width / half_height if half_height > 0.0 else 0.0
+    normal, mu, mu_t = g.force / 2.0, g.contact.mu, g.contact.mu_torsion
+    sin_a = np.clip(np.asarray(mass) * 9.81 / (4.0 * mu * normal), 0.0, 1.0) if normal > 0 else np.ones(1)
+    cos_a = np.sqrt(1.0 - sin_a**2)
+    if mu_t <= 0.0:
+        return np.asarray(np.abs(yaw) * bound, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        linear = g.half_width * np.asarray(mass) * moment_per_kg * mu / (4.0 * normal * mu_t**2 * cos_a)
+    rate = np.where(cos_a > 0.0, np.minimum(bound, linear), bound)
+    return np.asarray(np.abs(yaw) * rate, dtype=float)
 
 
 def receiver_critical_mass(
-    miss: ReceiverMiss, g: Grip, offsets: FloatArray, mu: float, mass_cap: float, per_pad: int = 4
+    miss: ReceiverMiss,
+    g: Grip,
+    offsets: FloatArray,
+    mu: float,
+    mass_cap: float,
+    yaw: FloatArray | None = None,
 ) -> FloatArray:
     """The smallest mass at which the handover fails, per offset (inf: none).
 
-    The face under the receiver moves by the giver's creep turn (Rodrigues) plus the giving
-    arm's sag, both growing with m; the receiver misses when that motion along its approach
+    The giver's object turns about the closing axis by its creep (growing with m) and while
+    a yaw error is squared out of its jaws (:func:`squaring_turn`). The face under the
+    receiver moves by that turn (Rodrigues) plus the giving arm's sag (growing with m); the
+    receiver misses when that motion along its approach
     reaches the pads' planned depth, and it loses the object later when its shallower patch
     slips on its own carry (:func:`slip_critical_mass` with the object that much lower). Solved
     by bisection on m in [0, mass_cap] (the turn is kept below a quarter turn, where the drop
     grows with it).
     """
-    tilt = _tilt_per_kg(miss, g, offsets, mu, per_pad)
+    tilt, moment = creep_tilt_per_kg(miss, g, offsets, mu)
+    yaws = np.zeros(len(offsets)) if yaw is None else np.asarray(yaw, dtype=float)
+    sign = np.sign(tilt)
     rc = np.tile(miss.receiver_centre, (len(offsets), 1))
     rc[:, 0] += offsets * miss.lateral_shift
     lands = patch(miss.receiver, rc, miss.receiver_half).touches
 
     def drop(m: FloatArray) -> FloatArray:
-        theta = m * tilt
+        theta = m * tilt + sign * squaring_turn(g, miss.patch_half_height, moment, m, yaws)
         move = (
             np.sin(theta)[:, None] * miss.lever_cross
             + (1.0 - np.cos(theta))[:, None] * miss.lever_cross2
@@ -704,7 +763,8 @@ def receiver_critical_mass(
         return np.asarray(move @ miss.approach, dtype=float)
 
     with np.errstate(divide="ignore"):
-        hi = np.minimum(mass_cap, np.where(tilt != 0.0, 0.5 * np.pi / np.abs(tilt), mass_cap))
+        room = np.maximum(0.5 * np.pi - np.abs(yaws) * miss.squaring, 0.0)
+        hi = np.minimum(mass_cap, np.where(tilt != 0.0, room / np.abs(tilt), mass_cap))
     lo = np.zeros(len(offsets))
     rec = miss.receiver_span
     rec_offsets = offsets * miss.lateral_shift
@@ -729,9 +789,13 @@ def receiver_critical_mass(
 
 
 def critical_mass(
-    world: World, problem: HoldProblem, offsets: FloatArray, friction_scale: float = 1.0, per_pad: int = 4
+    world: World,
+    problem: HoldProblem,
+    offsets: FloatArray,
+    friction_scale: float = 1.0,
+    yaw: FloatArray | None = None,
 ) -> tuple[FloatArray, FloatArray]:
-    """Per lateral offset: the smallest failing mass over every hold and handover, and its cause.
+    """Per lateral offset (and yaw error, rad, same length): the smallest failing mass, its cause.
 
     Returns:
         (masses (n,), causes (n,) as 0 = a hand slips, 1 = a handover fails).
@@ -745,7 +809,7 @@ def critical_mass(
     for m in problem.misses:
         g = next(gr for sp, gr in problem.spans if sp is m.giver)
         mu = contact_parameters(world.model, g.pads[0], geom, friction_scale).mu
-        miss = np.minimum(miss, receiver_critical_mass(m, g, offsets, mu, 20.0 * problem.mass, per_pad))
+        miss = np.minimum(miss, receiver_critical_mass(m, g, offsets, mu, 20.0 * problem.mass, yaw))
     return np.minimum(slip, miss), (miss < slip).astype(float)
 
 
@@ -764,8 +828,9 @@ def hold_probability(
 ) -> tuple[float, float]:
     """P(hold failure) over mass, friction and lateral offset, and the receiver-miss share of it.
 
-    Gauss-Hermite over the lateral offset (``order`` nodes; one when its sigma is 0) and over the
-    friction factor (when the object's friction reaches the contacts), closed form in the mass.
+    Gauss-Hermite over the lateral offset (``order`` nodes; one when its sigma is 0), the yaw
+    error (when a handover turns on it) and the friction factor (when the object's friction
+    reaches the contacts), closed form in the mass.
     """
     if uncertainty.object_position > 0.0:
         z, we = gauss_hermite_normal(order)
@@ -778,57 +843,40 @@ def hold_probability(
         scales = np.maximum(SCALE_FLOOR, 1.0 + uncertainty.friction * zf)
     else:
         scales, wf = np.ones(1), np.ones(1)
-    aligned = aligned_probability(problem, uncertainty.object_yaw_rad)
+    if uncertainty.object_yaw_rad > 0.0 and problem.misses:
+        zy, wy = gauss_hermite_normal(max(4, order // 2))
+        yaws = uncertainty.object_yaw_rad * zy
+    else:
+        yaws, wy = np.zeros(1), np.ones(1)
+    rows_e, rows_y = np.repeat(offsets, len(yaws)), np.tile(yaws, len(offsets))
+    weights = np.repeat(we, len(yaws)) * np.tile(wy, len(offsets))
     total, missed = 0.0, 0.0
-    for per_pad, wa in ((4, aligned), (2, 1.0 - aligned)):
-        if wa <= 0.0:
-            continue
-        for s, w in zip(scales, wf, strict=True):
-            crit, cause = critical_mass(world, problem, offsets, float(s), per_pad)
-            p = exceed_mass_probability(crit, problem.mass, uncertainty.object_mass)
-            total += float(wa * w * (we @ p))
-            missed += float(wa * w * (we @ (p * cause)))
+    for s, w in zip(scales, wf, strict=True):
+        crit, cause = critical_mass(world, problem, rows_e, float(s), rows_y)
+        p = exceed_mass_probability(crit, problem.mass, uncertainty.object_mass)
+        total += float(w * (weights @ p))
+        missed += float(w * (weights @ (p * cause)))
     return float(np.clip(total, 0.0, 1.0)), float(np.clip(missed, 0.0, 1.0))
 
 
-def aligned_probability(problem: HoldProblem, yaw_sigma: float) -> float:
-    """P(the first grip's pads lie flat on the object): |yaw error| < r / (2 h_x).
-
-    A face turned by psi against the pad differs in depth by 2 h_x psi across the patch
-    width 2 h_x; once that exceeds the resting penetration r the far edge lifts off and
-    MuJoCo's box-box collision keeps the 2 contacts of one edge instead of the 4 corners (the
-    jaws do not square the object up). The yaw error is N(0, yaw_sigma^2).
-    """
-    if not problem.spans:
-        return 1.0
-    span, g = problem.spans[0]
-    if yaw_sigma <= 0.0:
-        return 1.0
-    p = patch(g, span.grasp_centre[[0, 2]][None, :], span.object_half)
-    width = 2.0 * float(p.half[0, 0])
-    if width <= 0.0:
-        return 1.0
-    _, r = contact_impedance(g.contact, g.inv_weight, g.force / 4.0)
-    return float(2.0 * ndtr(r / width / yaw_sigma) - 1.0)
-
-
 def _nominal_facts(world: World, problem: HoldProblem) -> dict[str, float | str]:
-    """Scalar facts of the nominal truth (no offset, nominal friction) for the report."""
+    """Scalar facts of the nominal truth (no offset, no yaw error, nominal friction) for the report."""
     zero = np.zeros(1)
     facts: dict[str, float | str] = {"hold_mass_kg": problem.mass}
-    for per_pad, name in ((4, "flat"), (2, "edge")):
-        crit, cause = critical_mass(world, problem, zero, 1.0, per_pad)
-        facts[f"hold_critical_mass_{name}_kg"] = float(crit[0])
-        facts[f"hold_critical_cause_{name}"] = "handover" if cause[0] else "slip"
+    crit, cause = critical_mass(world, problem, zero, 1.0, zero)
+    facts["hold_critical_mass_kg"] = float(crit[0])
+    facts["hold_critical_cause"] = "handover" if cause[0] else "slip"
     if problem.spans:
         g = problem.spans[0][1]
         facts["hold_grip_force_n"] = g.force
         facts["hold_contact_mu"] = g.contact.mu
     for miss in problem.misses:
         g = next(gr for sp, gr in problem.spans if sp is miss.giver)
-        for per_pad, name in ((4, "flat"), (2, "edge")):
-            tilt = float(_tilt_per_kg(miss, g, zero, g.contact.mu, per_pad)[0]) * problem.mass
-            facts[f"handover_tilt_{name}_deg"] = float(np.degrees(tilt))
+        tilt, moment = creep_tilt_per_kg(miss, g, zero, g.contact.mu)
+        facts["handover_creep_tilt_deg"] = float(np.degrees(tilt[0] * problem.mass))
+        mass = np.full(1, problem.mass)
+        turn = squaring_turn(g, miss.patch_half_height, moment, mass, np.ones(1))
+        facts["handover_squaring_tilt_per_yaw"] = float(turn[0])
         facts["handover_sag_m"] = float(problem.mass * (miss.sag @ miss.approach))
         facts["handover_receiver_depth_m"] = miss.depth
     return facts
