@@ -60,6 +60,7 @@ class AlternativeRisk:
     risk: Mapping[str, float] = field(default_factory=dict)
     value: float | None = None  # the ordering quantity (None when infeasible)
     reason: str = ""  # why infeasible
+    physics: str = ""  # what the dry run and the rollouts showed, in a line
 
     def as_dict(self) -> dict[str, Any]:
         return {
@@ -68,6 +69,7 @@ class AlternativeRisk:
             "risk": dict(self.risk),
             "value": self.value,
             "reason": self.reason,
+            "physics": self.physics,
         }
 
 
@@ -246,6 +248,8 @@ def request_table(request: ApprovalRequest) -> str:
             + "".join(f"{r.get(k, float('nan')):>10.4f}" for k in ("collision", "fall", "grasp", "combined"))
             + f"{r.get('expected_loss', float('nan')):>10.4f}"
         )
+        if alt.physics:
+            lines.append(f"       {alt.physics}")
     lines.append(f"  * recommended (lowest {request.ordering}); threshold {request.threshold:g}")
     return "\n".join(lines)
 

@@ -44,7 +44,7 @@ import traceback
 from collections.abc import Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import IO, Any, Literal
+from typing import IO, TYPE_CHECKING, Any, Literal
 
 import numpy as np
 from numpy.typing import NDArray
@@ -53,12 +53,17 @@ from executive.errors import ExecutiveError
 from executive.scenario_types import Scenario, SceneVariation
 from executive.world import Perturbation
 
+if TYPE_CHECKING:
+    from executive.runner import RunResult
+
 __all__ = [
     "FAILURE_MODES",
     "PREDICTOR",
     "CampaignResult",
     "Prediction",
     "TrialLog",
+    "error_fields",
+    "outcome_fields",
     "predict",
     "read_trials",
     "run_campaign",
@@ -214,33 +219,45 @@ def run_trial(
         truth = build(estimate, perturbation, kind="truth")
         result = execute_plan(prediction.plan, truth, estimate.mission[task_index])
     except Exception as exc:  # a defect in a trial must not end the campaign; it is counted
-        record["outcome"] = "error"
-        last = traceback.extract_tb(exc.__traceback__)[-1]
-        record["failure"] = {
-            "mode": "error",
-            "detail": f"{type(exc).__name__}: {exc} ({Path(last.filename).name}:{last.lineno})",
-        }
+        record.update(error_fields(exc))
         return record
-    record["sim_time_s"] = round(result.sim_time_s, 6)
+    record.update(outcome_fields(result))
+    return record
+
+
+def error_fields(exc: BaseException) -> dict[str, Any]:
+    """The record of a physics run whose code raised (a defect, counted as outcome ``error``)."""
+    last = traceback.extract_tb(exc.__traceback__)[-1]
+    detail = f"{type(exc).__name__}: {exc} ({Path(last.filename).name}:{last.lineno})"
+    return {"outcome": "error", "failure": {"mode": "error", "detail": detail}}
+
+
+def outcome_fields(result: RunResult) -> dict[str, Any]:
+    """What a physics run's record says of its outcome: outcome, failure, sim time, placement error.
+
+    ``outcome`` is ``success``, ``timeout`` or the failure detector's mode (``unstable`` when
+    the run failed without a detector verdict).
+    """
+    out: dict[str, Any] = {"sim_time_s": round(result.sim_time_s, 6)}
     if result.placement_error_m is not None:
-        record["placement_error_m"] = round(result.placement_error_m, 6)
+        out["placement_error_m"] = round(result.placement_error_m, 6)
     if result.outcome == "success":
-        record["outcome"] = "success"
+        out["outcome"] = "success"
     elif result.outcome == "timeout":
-        record["outcome"] = "timeout"
-        record["failure"] = {"mode": "timeout", "detail": result.message}
+        out["outcome"] = "timeout"
+        out["failure"] = {"mode": "timeout", "detail": result.message}
     else:
         failure = result.failure
         mode = failure.mode if failure is not None else "unstable"
-        record["outcome"] = mode
-        record["failure"] = {
+        out["outcome"] = mode
+        out["failure"] = {
             "mode": mode,
             "detail": failure.detail if failure is not None else result.message,
             "time": round(failure.time, 6) if failure is not None else None,
             "bodies": list(failure.bodies) if failure is not None else [],
             "force": round(failure.force, 3) if failure is not None else 0.0,
         }
-    return record
+    return out
 
 
 def _perturbation_json(p: dict[str, Any]) -> dict[str, Any]:

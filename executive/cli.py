@@ -11,11 +11,15 @@ import argparse
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from executive import registry
 from executive.errors import ExecutiveError
 from executive.scenario_types import Scenario
 from executive.world import World, build
+
+if TYPE_CHECKING:
+    from executive.assessment import AlternativeRisk
 
 __all__ = ["main"]
 
@@ -95,7 +99,9 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    scenario = _load(args.scenario)
+    from executive.risk.rollouts import with_rollouts
+
+    scenario = with_rollouts(_load(args.scenario), args.rollouts)
     if args.alternative is None:
         return _run_mission(scenario, args)
     return _run_one(scenario, args)
@@ -176,30 +182,49 @@ def _run_one(scenario: Scenario, args: argparse.Namespace) -> int:
 
 
 def _cmd_plan(args: argparse.Namespace) -> int:
-    import mujoco
-
     from executive.assessment import assess_task
-    from executive.report import plot_alternatives, risk_json, risk_table
-    from executive.risk.fall import support_polygon
+    from executive.report import risk_json
+    from executive.risk.rollouts import PhysicsCheck, with_rollouts
 
-    scenario = _load(args.scenario)
+    scenario = with_rollouts(_load(args.scenario), args.rollouts)
     world = build(scenario)
     tasks = []
-    for i, task in enumerate(scenario.mission):
-        label = f"{i}: transfer {task.object}"
-        alternatives = assess_task(world, task)
-        tasks.append((label, alternatives))
-        if not args.json:
-            print(risk_table(scenario, label, alternatives))
-        if args.plot:
-            mujoco.mj_forward(world.model, world.data)
-            polygon = support_polygon(world, world.data, from_contacts=False)
-            for path in plot_alternatives(scenario, alternatives, polygon, Path(args.plot) / f"task{i}"):
-                if not args.json:
-                    print(f"plot      {path}")
+    physics = PhysicsCheck(scenario.risk.rollouts.jobs)
+    try:
+        for i, task in enumerate(scenario.mission):
+            label = f"{i}: transfer {task.object}"
+            alternatives, _ = physics.check(world, assess_task(world, task))
+            tasks.append((label, alternatives))
+            _print_plan(args, scenario, world, i, label, alternatives)
+    finally:
+        physics.close()
     if args.json:
         print(risk_json(scenario, tasks))
     return EXIT_OK
+
+
+def _print_plan(
+    args: argparse.Namespace,
+    scenario: Scenario,
+    world: World,
+    i: int,
+    label: str,
+    alternatives: list[AlternativeRisk],
+) -> None:
+    """One task's risk table (unless ``--json``) and its plots (``--plot DIR``)."""
+    import mujoco
+
+    from executive.report import plot_alternatives, risk_table
+    from executive.risk.fall import support_polygon
+
+    if not args.json:
+        print(risk_table(scenario, label, alternatives))
+    if args.plot:
+        mujoco.mj_forward(world.model, world.data)
+        polygon = support_polygon(world, world.data, from_contacts=False)
+        for path in plot_alternatives(scenario, alternatives, polygon, Path(args.plot) / f"task{i}"):
+            if not args.json:
+                print(f"plot      {path}")
 
 
 def _cmd_campaign(args: argparse.Namespace) -> int:
@@ -282,6 +307,10 @@ def _parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     scenario_help = "a scenario file path, or the name of a bundled scenario (see `executive list`)"
+    rollouts_help = (
+        "physics rollouts per alternative on truths sampled from the uncertainty (overrides the "
+        "scenario's risk.rollouts.count; 0: off, the dry runs still run)"
+    )
 
     p = sub.add_parser("list", help="name the bundled scenarios and robots")
     p.set_defaults(func=_cmd_list)
@@ -301,6 +330,7 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("scenario", help=scenario_help)
     p.add_argument("--json", action="store_true", help="print the table as JSON for machines")
     p.add_argument("--plot", metavar="DIR", help="write CoM/support-polygon and distance plots to DIR")
+    p.add_argument("--rollouts", type=int, metavar="N", help=rollouts_help)
     p.set_defaults(func=_cmd_plan)
 
     p = sub.add_parser(
@@ -308,6 +338,7 @@ def _parser() -> argparse.ArgumentParser:
         help="run the mission: plan every alternative, gate on risk, execute the lowest-risk one in physics",
     )
     p.add_argument("scenario", help=scenario_help)
+    p.add_argument("--rollouts", type=int, metavar="N", help=rollouts_help)
     p.add_argument(
         "--alternative",
         help="execute this alternative of task 0 only (left, right, left_to_right, ...): "

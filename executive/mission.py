@@ -37,6 +37,7 @@ from executive.audit import AuditLog, write_summary
 from executive.detectors import FailureDetector
 from executive.execution import SimulatedRobot
 from executive.live_risk import LiveRiskMonitor
+from executive.risk.rollouts import PhysicsCheck
 from executive.scenario_types import Scenario
 from executive.selector import RiskSelector, task_label
 from executive.world import World, build, sample_perturbation
@@ -132,6 +133,8 @@ class Executive:
         self.robot = robot
         self.folder = Path(out) if out is not None else None
         self.log = AuditLog(self.folder)
+        # Every decision is checked in physics (dry runs, rollouts) in warm worker processes.
+        self.physics = PhysicsCheck(sc.risk.rollouts.jobs)
         self.selectors = [
             RiskSelector(
                 f"task{i}",
@@ -141,6 +144,7 @@ class Executive:
                 log=self.log,
                 timeout_s=sc.approval.timeout_s,
                 guard=guard,
+                physics=self.physics,
                 background=background,
             )
             for i, task in enumerate(sc.mission)
@@ -276,6 +280,7 @@ class Executive:
     def close(self) -> None:
         for selector in self.selectors:
             selector.shutdown()
+        self.physics.close()
         self.tree.shutdown()
         self.log.close()
 

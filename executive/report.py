@@ -15,6 +15,7 @@ from typing import Any
 import numpy as np
 
 from executive.assessment import AlternativeRisk
+from executive.risk.rollouts import physics_text
 from executive.scenario_types import Scenario
 
 __all__ = ["chosen_index", "plot_alternatives", "risk_json", "risk_table"]
@@ -52,8 +53,22 @@ def risk_table(scenario: Scenario, task_label: str, alternatives: Sequence[Alter
             + f"{r.probability:>10.4f}{r.weighted_sum:>10.3f}{r.expected_loss:>10.4f}"
             + f"{dist * 1000:>8.1f}mm{margin * 1000:>7.1f}mm"
         )
+        if alt.physics is not None:
+            lines.append(f"  {'':<15}{physics_text(alt.physics)}{_fused_text(alt.physics)}")
     lines.append("collision/fall/grasp/P(any): probabilities; seed sum: the seed's weighted sum; * chosen")
     return "\n".join(lines)
+
+
+def _fused_text(physics: dict[str, Any]) -> str:
+    """``; P(collision) analytic 0.051 -> fused 0.049 [0.010, 0.120], ...`` when rollouts ran."""
+    modes = physics.get("modes")
+    if not modes:
+        return ""
+    parts = [
+        f"{m} {v['analytic']:.3f}->{v['fused']:.3f} [{v['interval'][0]:.3f}, {v['interval'][1]:.3f}]"
+        for m, v in modes.items()
+    ]
+    return "; analytic->fused " + ", ".join(parts)
 
 
 def risk_json(scenario: Scenario, tasks: Sequence[tuple[str, Sequence[AlternativeRisk]]]) -> str:
@@ -64,6 +79,8 @@ def risk_json(scenario: Scenario, tasks: Sequence[tuple[str, Sequence[Alternativ
         rows = []
         for i, alt in enumerate(alternatives):
             row: dict[str, Any] = {"name": alt.name, "feasible": alt.feasible, "chosen": i == chosen}
+            if alt.physics is not None:
+                row["physics"] = alt.physics
             if alt.risk is None:
                 row["error"] = alt.error
             else:

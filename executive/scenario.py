@@ -287,6 +287,7 @@ def _rollouts(node: Node) -> RolloutConfig:
             "batch": ("batch", lambda n: n.integer(ge=1)),
             "budget_s": ("budget_s", Node.positive),
             "confidence": ("confidence", lambda n: n.number(gt=0.5, le=0.999)),
+            "indifference": ("indifference", Node.non_negative),
             "prior_weight": ("prior_weight", Node.non_negative),
             "jobs": ("jobs", lambda n: n.integer(ge=1)),
         },

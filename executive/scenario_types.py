@@ -174,13 +174,15 @@ class RolloutConfig:
     of ``batch`` per alternative, until the sequential stopping rule says the choice is clear,
     ``count`` rollouts per alternative are done, or ``budget_s`` of wall time is spent. The
     counts are fused with the analytic prediction (a Beta prior of weight ``prior_weight``).
+    The dry run (each alternative once on the estimate) always runs; it is not configured here.
     """
 
     count: int = 0  # most rollouts per alternative; 0: off (the dry runs still run)
     min_count: int = 8  # rollouts per alternative before the stopping rule may stop
     batch: int = 4  # rollouts per alternative per round
     budget_s: float = 60.0  # s of wall time for all rollouts of one decision
-    confidence: float = 0.95  # level of the intervals the stopping rule compares
+    confidence: float = 0.95  # posterior probability at which the stopping rule calls the choice clear
+    indifference: float = 0.05  # in the ordering's units: a choice this close to the best is as good
     prior_weight: float = 10.0  # pseudo-trials the analytic prediction counts for
     jobs: int = 2  # worker processes
 

@@ -50,6 +50,7 @@ from executive.composition import build_subtree
 from executive.errors import ExecutiveError
 from executive.planning import Planner
 from executive.risk.collision import CollisionModel
+from executive.risk.rollouts import PhysicsCheck, PhysicsVerdict, physics_text
 from executive.scenario_types import TransferTask
 from executive.world import World
 
@@ -57,9 +58,10 @@ __all__ = ["RiskSelector", "task_label"]
 
 Status = py_trees.common.Status
 FloatArray = np.ndarray
-#: What the planning thread hands the tick: every alternative's assessment, and the ready
-#: (set up) subtrees of the feasible ones by name.
-Planned = tuple[list[AlternativeRisk], dict[str, py_trees.behaviour.Behaviour]]
+#: What the planning thread hands the tick: every alternative's assessment (after the physics
+#: check), the check's verdict (None without one), and the ready (set up) subtrees of the
+#: feasible ones by name.
+Planned = tuple[list[AlternativeRisk], PhysicsVerdict | None, dict[str, py_trees.behaviour.Behaviour]]
 
 #: Failure modes after which nothing is re-tried.
 TERMINAL_MODES = ("fall", "unstable")
@@ -73,6 +75,8 @@ def task_label(task: TransferTask) -> str:
 def risk_row(alt: AlternativeRisk, ordering: str) -> dict[str, Any]:
     """One alternative's line for the log and the approval request."""
     row: dict[str, Any] = {"name": alt.name, "feasible": alt.feasible}
+    if alt.physics is not None:
+        row["physics"] = alt.physics
     if alt.risk is None:
         row["reason"] = alt.error
         return row
@@ -98,6 +102,8 @@ class RiskSelector(py_trees.composites.Composite):
     has one) where the objects are.
         timeout_s: approval timeout (None: wait forever).
         guard: wrap motions in live risk guards.
+        physics: the physics check (dry runs, rollouts) every decision goes through; None
+            only where the caller checks plans in physics itself.
         background: plan in a worker thread (ticks never block); False plans inside the
             tick (blocking, for batch use).
     """
@@ -112,6 +118,7 @@ class RiskSelector(py_trees.composites.Composite):
         log: AuditLog,
         timeout_s: float | None = 60.0,
         guard: bool = True,
+        physics: PhysicsCheck | None = None,
         background: bool = True,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
@@ -122,6 +129,7 @@ class RiskSelector(py_trees.composites.Composite):
         self.log = log
         self.timeout_s = timeout_s
         self.guard = guard
+        self.physics = physics
         self.background = background
         self.clock = clock
         risk = estimate.scenario.risk
@@ -223,7 +231,10 @@ class RiskSelector(py_trees.composites.Composite):
         def work() -> Planned:
             assert self._planner is not None and self._collision is not None
             results = assess_task(self.estimate, task, self._planner, self._collision, q_start=q)
-            return results, self._subtrees(results, monitor)
+            verdict = None
+            if self.physics is not None:
+                results, verdict = self.physics.check(self.estimate, results, q_start=q)
+            return results, verdict, self._subtrees(results, monitor)
 
         if self.background:
             if self._pool is None:
@@ -260,12 +271,13 @@ class RiskSelector(py_trees.composites.Composite):
                 self.feedback_message = f"planning {self.name}"
                 return Status.RUNNING
             try:
-                results, subtrees = self._future.result()
+                results, verdict, subtrees = self._future.result()
             except ExecutiveError as exc:
                 return self._finish("failed", {"mode": "planning", "detail": str(exc)})
             except Exception as exc:  # a defect in planning must still end in the log
                 detail = f"planning raised {type(exc).__name__}: {exc} (a defect: please report it)"
                 return self._finish("failed", {"mode": "planning", "detail": detail})
+            self._log_physics(results, verdict)
             return self._decide(results, subtrees)
         if self.phase == "awaiting_approval":
             assert self.pending is not None
@@ -277,6 +289,20 @@ class RiskSelector(py_trees.composites.Composite):
         if self.phase == "executing":
             return None
         raise ExecutiveError(f"{self.name}: tick in phase '{self.phase}'")
+
+    def _log_physics(self, results: Sequence[AlternativeRisk], verdict: PhysicsVerdict | None) -> None:
+        """One ``dry_run`` line per alternative run in physics, and a ``rollouts`` line if any ran."""
+        if verdict is None:
+            return
+        for alt in results:
+            if alt.physics is not None:
+                dry = alt.physics["dry_run"]
+                self.log.record(
+                    "dry_run", task=self.name, name=alt.name, ok=alt.feasible, reason=alt.error, **dry
+                )
+        if verdict.stopped != "off":
+            per_alt = {a.name: a.physics for a in results if a.physics is not None and a.feasible}
+            self.log.record("rollouts", task=self.name, **verdict.as_dict(), alternatives=per_alt)
 
     def _decide(
         self, results: Sequence[AlternativeRisk], subtrees: dict[str, py_trees.behaviour.Behaviour]
@@ -323,6 +349,7 @@ class RiskSelector(py_trees.composites.Composite):
                     risk=a.risk.as_dict() if a.risk is not None else {},
                     value=a.risk.value(self.ordering) if a.risk is not None else None,
                     reason=a.error,
+                    physics=physics_text(a.physics) if a.physics is not None and a.feasible else "",
                 )
                 for a in [*feasible, *(r for r in results if r.risk is None)]
             ),

@@ -91,6 +91,7 @@ def test_request_and_decision_are_json_records() -> None:
         "risk": {},
         "value": None,
         "reason": "right hand cannot reach",
+        "physics": "",
     }
     pending = PendingApproval(REQUEST, None)
     PolicyChannel("auto").submit(pending)

@@ -1,0 +1,144 @@
+"""Fusing the analytic risk with what physics rollouts observed, and when to stop rolling out.
+
+Per failure mode, the analytic probability ``p_a`` is a Beta prior of weight ``w``
+(``Beta(w p_a, w (1 - p_a))``: it counts as ``w`` pseudo-trials) and ``k`` failures of that
+mode in ``n`` rollouts update it to ``Beta(w p_a + k, w (1 - p_a) + n - k)``, whose mean
+``(w p_a + k) / (w + n)`` is the fused probability (conjugate Beta-binomial update; Gelman
+et al., *Bayesian Data Analysis*, 3rd ed., section 2.4). The combined risk is then made from
+the fused modes exactly as from analytic ones (:func:`executive.risk.combine.combine`).
+
+The stopping rule (:func:`choice_confidence`) is a Bayesian indifference-zone rule: rolling
+out stops when the posterior probability that the alternative with the lowest posterior mean
+value is within ``indifference`` of the truly lowest reaches ``confidence``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from executive.risk.combine import CombinedRisk, combine
+from executive.scenario_types import RiskConfig
+
+__all__ = ["OBSERVED_AS", "ModePosterior", "choice_confidence", "fuse", "posteriors"]
+
+#: The rollout outcomes that count as failures of each analytic mode. The detector's
+#: ``unstable`` (a simulation that blew up, a robot no longer controlled) counts as a fall:
+#: nothing is re-tried after either. ``timeout`` counts in no mode; it is reported.
+OBSERVED_AS: Mapping[str, tuple[str, ...]] = {
+    "collision": ("collision",),
+    "fall": ("fall", "unstable"),
+    "grasp": ("drop",),
+}
+
+
+@dataclass(frozen=True)
+class ModePosterior:
+    """The Beta posterior of one failure mode's probability: ``Beta(a, b)``, and its cost."""
+
+    mode: str
+    a: float
+    b: float
+    severity: float  # expected loss per unit of probability (the analytic report's)
+
+    @property
+    def mean(self) -> float:
+        return self.a / (self.a + self.b)
+
+    def interval(self, confidence: float) -> tuple[float, float]:
+        """Equal-tailed credible interval at ``confidence``."""
+        tail = (1.0 - confidence) / 2.0
+        a, b = max(self.a, 1e-12), max(self.b, 1e-12)
+        return float(stats.beta.ppf(tail, a, b)), float(stats.beta.ppf(1.0 - tail, a, b))
+
+
+def posteriors(
+    analytic: CombinedRisk, counts: Mapping[str, int], n: int, prior_weight: float
+) -> list[ModePosterior]:
+    """Per analytic mode, the posterior after ``counts`` (outcome -> rollouts) of ``n`` rollouts.
+
+    Modes with no observed counterpart (not in :data:`OBSERVED_AS`) keep the analytic value
+    (``n`` counts as 0 for them).
+    """
+    out = []
+    for mode, report in analytic.components.items():
+        p = report.probability
+        observed = OBSERVED_AS.get(mode)
+        k = sum(counts.get(o, 0) for o in observed) if observed else 0
+        trials = n if observed else 0
+        if prior_weight + trials == 0:  # no prior and no data: the analytic value as a point mass
+            a, b = (p, 1.0 - p)
+        else:
+            a, b = prior_weight * p + k, prior_weight * (1.0 - p) + trials - k
+        out.append(ModePosterior(mode, a, b, report.severity))
+    return out
+
+
+def fuse(
+    analytic: CombinedRisk,
+    counts: Mapping[str, int],
+    n: int,
+    prior_weight: float,
+    confidence: float,
+    config: RiskConfig,
+) -> CombinedRisk:
+    """The combined risk made of the fused (posterior mean) probability of every mode.
+
+    Each report keeps its severity and traces; its bounds become the posterior's credible
+    interval and its details say what was fused (``analytic``, ``rollouts``, ``failures``).
+    """
+    reports = []
+    for post in posteriors(analytic, counts, n, prior_weight):
+        report = analytic.components[post.mode]
+        observed = OBSERVED_AS.get(post.mode)
+        k = sum(counts.get(o, 0) for o in observed) if observed else 0
+        details = {**report.details, "analytic": report.probability, "rollouts": n if observed else 0}
+        details["failures"] = k
+        reports.append(
+            dataclasses.replace(
+                report,
+                probability=post.mean,
+                probability_bounds=post.interval(confidence),
+                details=details,
+            )
+        )
+    return combine(reports, config)
+
+
+def _values(post: Sequence[ModePosterior], ordering: str, draws: int, rng: np.random.Generator) -> np.ndarray:
+    """``draws`` samples of the ordering value from independent mode posteriors."""
+    p = np.stack([rng.beta(max(m.a, 1e-12), max(m.b, 1e-12), draws) for m in post])
+    if ordering == "expected_loss":
+        return np.asarray(np.array([m.severity for m in post]) @ p)
+    return 1.0 - np.prod(1.0 - p, axis=0)  # probability of any failure (also for weighted_sum)
+
+
+def choice_confidence(
+    candidates: Mapping[str, Sequence[ModePosterior]],
+    ordering: str,
+    indifference: float,
+    *,
+    draws: int = 4000,
+    seed: int = 0,
+) -> tuple[str, float]:
+    """The alternative with the lowest posterior mean value, and P(it is within ``indifference`` of the best).
+
+    The probability is estimated from ``draws`` joint posterior samples (seeded). The seed's
+    weighted sum is no probability; with ``ordering == "weighted_sum"`` the rule judges the
+    probability of any failure instead.
+
+    Raises:
+        ValueError: no candidates.
+    """
+    if not candidates:
+        raise ValueError("choice_confidence needs at least one alternative")
+    rng = np.random.default_rng(seed)
+    names = list(candidates)
+    samples = np.stack([_values(candidates[name], ordering, draws, rng) for name in names])
+    best = int(np.argmin(samples.mean(axis=1)))
+    clear = samples[best] <= samples.min(axis=0) + indifference
+    return names[best], float(clear.mean())

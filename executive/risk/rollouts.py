@@ -1,0 +1,429 @@
+"""Risk checked in physics before the robot moves: dry runs and Monte Carlo rollouts.
+
+Every feasible alternative is first *dry-run*: executed once in MuJoCo on the estimate itself
+(truth = estimate), through the same subtree, servos and failure detectors as a real run
+(:func:`executive.runner.execute_plan`). A plan that fails with perfect knowledge is
+infeasible. Then, when ``risk.rollouts.count`` > 0, *rollouts*: the surviving alternatives
+executed on truths sampled from the scenario's uncertainty (the campaign's sampler), in rounds
+of ``batch`` per alternative, until the stopping rule of :mod:`executive.risk.fusion` calls
+the choice clear, ``count`` is reached, or the next round would overrun ``budget_s``. Rollout
+``j`` of every alternative uses the same truth (common random numbers).
+
+Jobs run through a ``run_map`` callable (jobs in, records out, in order): a
+:class:`RolloutPool` of warm worker processes, the campaign's backends, or ``map`` itself.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures
+import concurrent.futures.process
+import dataclasses
+import multiprocessing
+import os
+import time
+from collections import Counter
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import mujoco
+import numpy as np
+
+from executive.errors import ExecutiveError
+from executive.risk.combine import CombinedRisk
+from executive.risk.fusion import choice_confidence, fuse, posteriors
+from executive.scenario_types import RiskConfig, Scenario, SceneVariation
+
+if TYPE_CHECKING:
+    from executive.assessment import AlternativeRisk
+    from executive.composition import AlternativePlan
+    from executive.world import World
+
+__all__ = [
+    "PhysicsCheck",
+    "PhysicsResult",
+    "PhysicsVerdict",
+    "RolloutError",
+    "RolloutJob",
+    "RolloutPool",
+    "apply_verdict",
+    "check_alternatives",
+    "estimate_scenario",
+    "physics_text",
+    "rollout_seed",
+    "run_job",
+    "with_rollouts",
+]
+
+#: Keeps rollout seeds apart from the campaign's trial seeds (``trials.seed + i``).
+_ROLLOUT_STREAM = 0x5EED_0F_0
+
+
+class RolloutError(ExecutiveError):
+    """The physics check could not run (a worker process died)."""
+
+
+RunMap = Callable[[Sequence["RolloutJob"]], list[dict[str, Any]]]
+
+
+@dataclass(frozen=True)
+class RolloutJob:
+    """One physics run of a planned alternative: the dry run (``seed`` None) or a rollout."""
+
+    scenario: Scenario  # the estimate as a scenario (see :func:`estimate_scenario`)
+    plan: AlternativePlan  # its task is the one executed
+    seed: int | None
+    q_start: np.ndarray | None = None  # the robot's joints at the start (None: home)
+
+
+def rollout_seed(base_seed: int, j: int) -> int:
+    """The truth seed of rollout ``j`` (the same for every alternative), apart from trial seeds."""
+    return int(np.random.SeedSequence([base_seed, _ROLLOUT_STREAM, j]).generate_state(1)[0])
+
+
+def estimate_scenario(world: World) -> Scenario:
+    """The scenario whose nominal scene is ``world``'s current estimate of the objects.
+
+    Objects are put where the estimate has them now (position, yaw); the trial-to-trial scene
+    variation is dropped: the rollouts' truths are sampled around this one estimate.
+    """
+    scenario = world.scenario
+    objects = []
+    for body in scenario.scene.objects:
+        pos, quat = world.object_pose(body.name)
+        w, x, y, z = quat
+        yaw = float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))  # z-y-x Euler yaw
+        roll, pitch, _ = body.orientation_rad
+        position = (float(pos[0]), float(pos[1]), float(pos[2]))
+        objects.append(dataclasses.replace(body, position=position, orientation_rad=(roll, pitch, yaw)))
+    scene = dataclasses.replace(scenario.scene, objects=tuple(objects))
+    trials = dataclasses.replace(scenario.trials, scene_variation=SceneVariation())
+    return dataclasses.replace(scenario, scene=scene, trials=trials)
+
+
+def with_rollouts(scenario: Scenario, count: int | None) -> Scenario:
+    """``scenario`` with ``risk.rollouts.count`` set to ``count`` (None: unchanged).
+
+    The stopping rule's minimum is lowered to ``count`` when it is above it.
+
+    Raises:
+        ExecutiveError: a negative count.
+    """
+    if count is None:
+        return scenario
+    if count < 0:
+        raise ExecutiveError(f"--rollouts must be 0 (off) or more; got {count}")
+    cfg = scenario.risk.rollouts
+    cfg = dataclasses.replace(cfg, count=count, min_count=min(cfg.min_count, max(count, 1)))
+    return dataclasses.replace(scenario, risk=dataclasses.replace(scenario.risk, rollouts=cfg))
+
+
+def _truth(job: RolloutJob) -> World:
+    from executive.world import build, sample_perturbation
+
+    if job.seed is None:
+        world = build(job.scenario)
+    else:
+        rng = np.random.default_rng(job.seed)
+        world = build(job.scenario, sample_perturbation(job.scenario, rng), kind="truth")
+    if job.q_start is not None:
+        objects = [adr + k for adr in world.ids.object_qpos.values() for k in range(7)]
+        robot = np.setdiff1d(np.arange(world.model.nq), objects)
+        world.data.qpos[robot] = np.asarray(job.q_start, dtype=float)[robot]
+        world.data.qvel[:] = 0.0
+        mujoco.mj_forward(world.model, world.data)
+    return world
+
+
+def run_job(job: RolloutJob) -> dict[str, Any]:
+    """Execute ``job`` in physics; its record: alternative, seed, outcome, failure, wall time.
+
+    ``outcome`` is ``success``, a failure detector's mode, ``timeout``, or ``error`` (the code
+    raised: a defect, counted, never hidden).
+    """
+    from executive.campaign import error_fields, outcome_fields
+    from executive.runner import execute_plan
+
+    t0 = time.perf_counter()
+    record: dict[str, Any] = {"alternative": job.plan.name, "seed": job.seed, "failure": None}
+    try:
+        result = execute_plan(job.plan, _truth(job), job.plan.task)
+        record.update(outcome_fields(result))
+    except Exception as exc:
+        record.update(error_fields(exc))
+    record["wall_s"] = time.perf_counter() - t0
+    return record
+
+
+@dataclass
+class PhysicsResult:
+    """What physics said of one alternative: its dry run, its rollouts, the fused risk."""
+
+    alternative: str
+    dry_run: dict[str, Any]
+    analytic: CombinedRisk
+    counts: Counter[str] = field(default_factory=Counter)  # outcome -> rollouts
+    rollouts: int = 0
+    fused: CombinedRisk | None = None  # None: no rollouts ran (the analytic risk stands)
+
+    @property
+    def dry_run_ok(self) -> bool:
+        return bool(self.dry_run.get("outcome") == "success")
+
+    @property
+    def risk(self) -> CombinedRisk:
+        """The risk the selector ranks by: fused when rollouts ran, else analytic."""
+        return self.fused if self.fused is not None else self.analytic
+
+    def dry_run_reason(self) -> str:
+        failure = self.dry_run.get("failure") or {}
+        detail = failure.get("detail") or self.dry_run.get("outcome", "")
+        return f"fails in simulation with the scene as estimated: {detail}"
+
+    def as_dict(self, confidence: float) -> dict[str, Any]:
+        """JSON-safe: the dry run, and per mode the analytic probability, counts, fused value, interval."""
+        out: dict[str, Any] = {"dry_run": _dry_json(self.dry_run), "rollouts": self.rollouts}
+        out["outcomes"] = dict(self.counts)
+        if self.fused is not None:
+            modes = {}
+            for mode, report in self.fused.components.items():
+                modes[mode] = {
+                    "analytic": self.analytic.components[mode].probability,
+                    "failures": report.details.get("failures", 0),
+                    "fused": report.probability,
+                    "interval": list(report.probability_bounds),
+                }
+            out["modes"] = modes
+            out["confidence"] = confidence
+        return out
+
+
+def physics_text(physics: Mapping[str, Any]) -> str:
+    """One line for people: the dry run's outcome and, if rollouts ran, their failures by mode."""
+    dry = physics["dry_run"]
+    text = "dry run: ok" if dry.get("outcome") == "success" else f"dry run: {dry.get('outcome')}"
+    n = physics.get("rollouts", 0)
+    if n:
+        failed = {k: v for k, v in physics.get("outcomes", {}).items() if k != "success"}
+        shown = ", ".join(f"{v} {k}" for k, v in sorted(failed.items())) or "no failure"
+        text += f"; {n} rollouts: {shown}"
+    return text
+
+
+def _dry_json(record: Mapping[str, Any]) -> dict[str, Any]:
+    keep = ("outcome", "failure", "sim_time_s", "wall_s")
+    return {k: record[k] for k in keep if k in record}
+
+
+@dataclass
+class PhysicsVerdict:
+    """The physics check of one decision: per alternative its result, and how the rollouts ended.
+
+    ``stopped``: ``off`` (no rollouts configured), ``none left`` (every dry run failed),
+    ``clear`` (the stopping rule), ``count`` or ``budget``.
+    """
+
+    alternatives: dict[str, PhysicsResult]
+    rollouts: int = 0  # per surviving alternative
+    stopped: str = "off"
+    confidence: float | None = None  # the stopping rule's last P(choice within the indifference)
+    dry_run_s: float = 0.0
+    rollout_s: float = 0.0
+
+    def as_dict(self) -> dict[str, Any]:
+        return {
+            "rollouts": self.rollouts,
+            "stopped": self.stopped,
+            "choice_confidence": self.confidence,
+            "dry_run_s": self.dry_run_s,
+            "rollout_s": self.rollout_s,
+        }
+
+
+def check_alternatives(
+    plans: Mapping[str, AlternativePlan],
+    analytic: Mapping[str, CombinedRisk],
+    scenario: Scenario,
+    run_map: RunMap,
+    *,
+    q_start: np.ndarray | None = None,
+    clock: Callable[[], float] = time.monotonic,
+) -> PhysicsVerdict:
+    """Dry-run every planned alternative, then roll out the survivors (see the module docstring).
+
+    Args:
+        plans: the feasible alternatives' plans, by name.
+        analytic: their analytic risk, by name.
+        scenario: the estimate as a scenario (:func:`estimate_scenario`); its ``risk.rollouts``
+            configures the rollouts and its ``trials.seed`` seeds them.
+        run_map: runs jobs (in worker processes or here), records back in order.
+        q_start: the robot's joints where the plans start (None: home).
+
+    Returns:
+        The verdict; an alternative whose dry run failed has no rollouts and no fused risk.
+    """
+    t0 = clock()
+    dry = [RolloutJob(scenario, plan, None, q_start) for plan in plans.values()]
+    results = {
+        name: PhysicsResult(name, record, analytic[name])
+        for name, record in zip(plans, run_map(dry), strict=True)
+    }
+    verdict = PhysicsVerdict(results, dry_run_s=clock() - t0)
+    alive = [name for name, r in results.items() if r.dry_run_ok]
+    if scenario.risk.rollouts.count == 0:
+        return verdict
+    if not alive:
+        verdict.stopped = "none left"
+        return verdict
+    _roll_out(verdict, [plans[a] for a in alive], scenario, run_map, q_start, clock)
+    for name in alive:
+        r = results[name]
+        cfg = scenario.risk.rollouts
+        r.fused = fuse(r.analytic, r.counts, r.rollouts, cfg.prior_weight, cfg.confidence, scenario.risk)
+    return verdict
+
+
+def _roll_out(
+    verdict: PhysicsVerdict,
+    plans: Sequence[AlternativePlan],
+    scenario: Scenario,
+    run_map: RunMap,
+    q_start: np.ndarray | None,
+    clock: Callable[[], float],
+) -> None:
+    """Rounds of rollouts until the stopping rule, the count or the time budget ends them."""
+    cfg, risk = scenario.risk.rollouts, scenario.risk
+    results, t0, n, round_s = verdict.alternatives, clock(), 0, 0.0
+    verdict.stopped = "count"
+    while n < cfg.count:
+        if round_s > 0 and clock() - t0 + round_s > cfg.budget_s:
+            verdict.stopped = "budget"
+            break
+        size = min(cfg.batch, cfg.count - n)
+        seeds = [rollout_seed(scenario.trials.seed, j) for j in range(n, n + size)]
+        jobs = [RolloutJob(scenario, plan, seed, q_start) for seed in seeds for plan in plans]
+        started = clock()
+        for job, record in zip(jobs, run_map(jobs), strict=True):
+            results[job.plan.name].counts[record["outcome"]] += 1
+        round_s, n = clock() - started, n + size
+        for plan in plans:
+            results[plan.name].rollouts = n
+        if n >= cfg.min_count:
+            verdict.confidence = _confidence(results, plans, risk, n)
+            if verdict.confidence >= cfg.confidence:
+                verdict.stopped = "clear"
+                break
+    verdict.rollouts, verdict.rollout_s = n, clock() - t0
+
+
+def _confidence(
+    results: Mapping[str, PhysicsResult], plans: Sequence[AlternativePlan], risk: RiskConfig, n: int
+) -> float:
+    """The stopping rule's P(the current best is within the indifference of the best)."""
+    if len(plans) == 1:
+        return 1.0
+    cfg = risk.rollouts
+    candidates = {
+        p.name: posteriors(results[p.name].analytic, results[p.name].counts, n, cfg.prior_weight)
+        for p in plans
+    }
+    return choice_confidence(candidates, risk.ordering, cfg.indifference, seed=n)[1]
+
+
+def _init_worker() -> None:
+    os.environ.setdefault("MUJOCO_GL", "egl")
+
+
+class RolloutPool:
+    """Warm worker processes that run :class:`RolloutJob` s; call it with jobs, get records.
+
+    The processes are spawned (clean: no inherited MuJoCo or GL state, no threads) on
+    :meth:`start` or the first call, and kept until :meth:`close`. A worker that dies takes
+    the pool down with a :class:`RolloutError` (never a hang); the next call starts a new one.
+    """
+
+    def __init__(self, jobs: int) -> None:
+        if jobs < 1:
+            raise ValueError(f"a rollout pool needs at least 1 worker; got {jobs}")
+        self.jobs = jobs
+        self._pool: concurrent.futures.ProcessPoolExecutor | None = None
+
+    def start(self) -> concurrent.futures.ProcessPoolExecutor:
+        """The worker processes, spawned now if they are not yet running."""
+        if self._pool is None:
+            ctx = multiprocessing.get_context("spawn")
+            self._pool = concurrent.futures.ProcessPoolExecutor(
+                self.jobs, mp_context=ctx, initializer=_init_worker
+            )
+        return self._pool
+
+    def __call__(self, jobs: Sequence[RolloutJob]) -> list[dict[str, Any]]:
+        pool = self.start()
+        try:
+            return list(pool.map(run_job, jobs))
+        except concurrent.futures.process.BrokenProcessPool as exc:
+            self.close()
+            raise RolloutError(f"a physics worker process died: {exc}") from exc
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown(wait=True, cancel_futures=True)
+            self._pool = None
+
+
+def apply_verdict(
+    results: Sequence[AlternativeRisk], verdict: PhysicsVerdict, confidence: float
+) -> list[AlternativeRisk]:
+    """``results`` as physics left them: failed dry runs infeasible, the rest with their fused risk.
+
+    Every checked alternative carries its physics summary (``physics``); one whose dry run failed
+    keeps its analytic risk there, and its reason names the detector's verdict.
+    """
+    out = []
+    for alt in results:
+        checked = verdict.alternatives.get(alt.name)
+        if checked is None:
+            out.append(alt)
+            continue
+        physics = checked.as_dict(confidence)
+        if not checked.dry_run_ok:
+            physics["analytic"] = checked.analytic.as_dict()
+            out.append(
+                dataclasses.replace(
+                    alt, feasible=False, risk=None, error=checked.dry_run_reason(), physics=physics
+                )
+            )
+        else:
+            out.append(dataclasses.replace(alt, risk=checked.risk, physics=physics))
+    return out
+
+
+class PhysicsCheck:
+    """The physics check of the executive's decisions: a warm :class:`RolloutPool` and the rule.
+
+    Args:
+        jobs: worker processes (``risk.rollouts.jobs``).
+
+    Use :meth:`check` on a decision's assessed alternatives; :meth:`close` when done.
+    """
+
+    def __init__(self, jobs: int) -> None:
+        self.pool = RolloutPool(jobs)
+
+    def check(
+        self, world: World, results: Sequence[AlternativeRisk], q_start: np.ndarray | None = None
+    ) -> tuple[list[AlternativeRisk], PhysicsVerdict]:
+        """Dry-run and roll out the feasible ``results`` planned on the estimate ``world``."""
+        feasible = [a for a in results if a.plan is not None and a.risk is not None]
+        plans = {a.name: a.plan for a in feasible if a.plan is not None}
+        analytic = {a.name: a.risk for a in feasible if a.risk is not None}
+        scenario = estimate_scenario(world)
+        verdict = (
+            check_alternatives(plans, analytic, scenario, self.pool, q_start=q_start)
+            if plans
+            else PhysicsVerdict({})
+        )
+        return apply_verdict(results, verdict, scenario.risk.rollouts.confidence), verdict
+
+    def close(self) -> None:
+        self.pool.close()
