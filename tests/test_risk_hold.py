@@ -221,7 +221,7 @@ def test_probability_matches_monte_carlo_over_the_truth_sampler(heavy: tuple[Wor
     for i in range(n):
         pert = sample_perturbation(scenario, rng)
         dx, dy, yaws[i] = pert.object_offsets["book"]
-        offsets[i] = -(dx * x_world[0] + dy * x_world[1])  # the object moved: its centre in the site frame
+        offsets[i] = dx * x_world[0] + dy * x_world[1]  # the object moved by (dx, dy); the hand did not
         masses[i] = problem.mass * pert.object_mass_scale["book"]
     crit, _ = critical_mass(world, problem, offsets, 1.0, yaws)
     fails = int(np.sum(masses >= crit))
