@@ -23,22 +23,28 @@ model, per hand and per knot of the planned trajectories while that hand holds t
   frictional constraint still slides at v = R f / b, R = (1 - d)/d A_ii / impratio per
   friction row (elliptic cones; torsional rows R mu^2 / mu_torsion^2), b = 2 / (dmax
   timeconst), A_ii MuJoCo's diagonal approximation body_invweight0 of the two bodies and d the
-  solimp impedance at the contact's resting penetration. Under a
-  moment tau the object turns about the closing axis at omega = tau / (b sum_i (r_i^2 / R_t +
-  1 / R_tor)). The turn accumulated while one hand holds the object on its own lowers the
-  far end where a handover's receiver closes its jaws, together with the giving arm's servo
-  sag under the object's weight, dx = J Kp^-1 J^T m g (servos without feed-forward of the
-  object's weight): the receiver misses when that drop exceeds the planned depth of its pads
-  on the object, or when its pads do not overlap the object along the jaws.
+  solimp impedance at the contact's resting penetration. Under a moment tau the object turns
+  about the closing axis at omega = tau / (b sum_i (r_i^2 / R_t + 1 / R_tor)).
+* Squaring (:func:`squaring_turn`): jaws closed on an object resting on the table leave its yaw
+  error; lifted, the jaws square it, and while its faces slide along the pads the weight's
+  moment turns it about the closing axis (elliptic-cone friction linearised about the slide,
+  capped by the edge contacts' kinematic bound w / (2 h_z) per radian of yaw).
+* Handover: the turns accumulated while the giver holds the object alone, and the giving
+  arm's servo sag and turn under the object's weight, dx = J Kp^-1 J^T m g (servos without
+  feed-forward of the object's weight), lower the face where the receiver closes its jaws:
+  the receiver misses when that drop reaches the planned depth of its pads on the object, or
+  when its pads do not overlap the object along the jaws, and loses it later when its
+  shallower patch slips on its own carry.
 
 Uncertainty, as :func:`executive.world.sample_perturbation` draws the truth: mass m = m0
-max(0.2, 1 + s_m z), the object's friction mu0 max(0.2, 1 + s_f z'), and the object's position
-error e ~ N(0, s_p^2) along the grip's lateral axis, which moves the grasp point on the object.
-Every failure above grows with m at fixed (e, mu), so each (e, mu) has one critical mass
-m_c(e, mu) (the smallest over hands, knots and the receiver's miss; the union of the failures
-is exact), and P = E_{e, mu}[P(m >= m_c)] in closed form in m, by Gauss-Hermite quadrature over
-e and mu. Neglected: the object's rotational inertia, the creep's dependence on the truth mass
-through A_ii, and moments about the axes across the jaws (taken by the pads' pressure).
+max(0.2, 1 + s_m z), the object's friction mu0 max(0.2, 1 + s_f z'), the object's position
+error e ~ N(0, s_p^2) along the grip's lateral axis (it moves the grasp point on the object)
+and its yaw error ~ N(0, s_yaw^2). Every failure above grows with m at fixed (e, yaw, mu), so
+each has one critical mass m_c (the smallest over hands, knots and handovers: the union of
+the failures is exact), and P = E_{e, yaw, mu}[P(m >= m_c)], closed form in m, Gauss-Hermite
+quadrature over the others. Neglected: the object's rotational inertia, the creep's
+dependence on the truth mass through A_ii, moments about the axes across the jaws (taken by
+the pads' pressure), and how the turn changes the load's lever while it grows.
 """
 
 from __future__ import annotations
