@@ -44,7 +44,7 @@ class SafePosture:
         tilt_tolerance_deg: deg beyond ``max_trunk_tilt_deg`` the detector still accepts.
     """
 
-    max_pelvis_drop: float = 0.05
+    max_pelvis_drop: float = 0.10
     max_trunk_tilt_deg: float = 20.0
     pelvis_tolerance: float = 0.05
     tilt_tolerance_deg: float = 10.0

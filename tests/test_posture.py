@@ -72,9 +72,10 @@ def test_turned_book_left_is_refused_with_the_posture_reason_and_the_free_plan_f
     with truth = estimate, is a fall for the detector, and the fall model predicts it.
     """
     task = turned.scenario.mission[0]
-    posture = turned.profile.safe_posture
+    strict = _with_posture(turned, max_pelvis_drop=0.05)  # a robot allowed a 5 cm squat
+    posture = strict.profile.safe_posture
     with pytest.raises(PlanningError) as info:
-        plan_alternative(Planner(turned), turned, task, "left")
+        plan_alternative(Planner(strict), strict, task, "left")
     message = str(info.value)
     print(message)
     free_world = _with_posture(turned, max_pelvis_drop=1.0)
@@ -88,7 +89,7 @@ def test_turned_book_left_is_refused_with_the_posture_reason_and_the_free_plan_f
     assert "'left.transfer'" in message
     # The fall model on the estimate (the default posture) sees the free plan cross the floor.
     whole = concatenate(free.ordered_trajectories(), "left")
-    fall = assess_fall(turned, whole, turned.scenario.risk, turned.scenario.uncertainty)
+    fall = assess_fall(strict, whole, turned.scenario.risk, turned.scenario.uncertainty)
     sigma = turned.scenario.uncertainty.com
     floor = standing - posture.fall_pelvis_drop
     expected = norm.cdf((floor - (standing - depth)) / sigma)
@@ -143,7 +144,7 @@ def test_pelvis_limit_row_against_finite_differences() -> None:
 
 def test_a_move_that_starts_squatted_below_the_posture_goes_no_lower() -> None:
     """A start below the floor (a measured squat, say) is not refused: the pelvis rises from it."""
-    world = build(load("book_transfer"))
+    world = _with_posture(build(load("book_transfer")), max_pelvis_drop=0.05)
     posture = world.profile.safe_posture
     standing = standing_pelvis_height(world.model, world.ids.keyframe, world.ids.base_body)
     q = _squat(world, posture.max_pelvis_drop + 0.02)
@@ -243,7 +244,8 @@ def _hold_squat(world: World, drop: float) -> tuple[FailureDetector, float, floa
 
 
 def test_a_squat_within_the_posture_is_not_a_fall_and_one_beyond_its_tolerance_is() -> None:
-    world = build(load("book_transfer"))
+    # A 5 cm posture: a squat past its 10 cm fall floor keeps the hands above the table.
+    world = _with_posture(build(load("book_transfer")), max_pelvis_drop=0.05)
     posture = world.profile.safe_posture
     standing = standing_pelvis_height(world.model, world.ids.keyframe, world.ids.base_body)
     within, low_in, margin_in = _hold_squat(world, 0.9 * posture.max_pelvis_drop)
@@ -296,7 +298,7 @@ def test_fall_model_posture_term_against_monte_carlo() -> None:
 def test_profile_sets_the_safe_posture_and_rejects_a_bad_one() -> None:
     text = (SCENARIOS / "robots" / "humanoid" / "profile.yaml").read_text()
     base = loads_profile(text, base_dir=SCENARIOS / "robots" / "humanoid")
-    assert base.safe_posture == SafePosture(0.05, 20.0, 0.05, 10.0)
+    assert base.safe_posture == SafePosture(0.10, 20.0, 0.05, 10.0)
     lines = [line for line in text.splitlines() if not line.startswith("safe_posture:")]
     custom = "\n".join([*lines, "safe_posture: {max_pelvis_drop: 0.08, tilt_tolerance_deg: 5}"])
     profile = loads_profile(custom, base_dir=SCENARIOS / "robots" / "humanoid")
