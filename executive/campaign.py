@@ -41,7 +41,7 @@ import os
 import pickle
 import time
 import traceback
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any, Literal
@@ -54,6 +54,7 @@ from executive.scenario_types import Scenario, SceneVariation
 from executive.world import Perturbation
 
 if TYPE_CHECKING:
+    from executive.risk.rollouts import RolloutJob
     from executive.runner import RunResult
 
 __all__ = [
@@ -62,6 +63,7 @@ __all__ = [
     "CampaignResult",
     "Prediction",
     "TrialLog",
+    "check_predictions",
     "error_fields",
     "outcome_fields",
     "predict",
@@ -96,6 +98,8 @@ class Prediction:
     value: float | None  # the scenario's ordering quantity
     error: str = ""
     plan: Any = field(default=None, repr=False)  # AlternativePlan (None when infeasible)
+    assessed: Any = field(default=None, repr=False)  # CombinedRisk (None when infeasible)
+    physics: dict[str, Any] | None = None  # the physics check's summary, when it ran
 
 
 def predict(scenario: Scenario, task_index: int, alternative: str) -> Prediction:
@@ -114,7 +118,54 @@ def predict(scenario: Scenario, task_index: int, alternative: str) -> Prediction
         return Prediction(alternative, False, None, None, str(exc))
     model = CollisionModel(world, scenario.risk, uncertainty=scenario.uncertainty)
     risk = assess_plan(world, plan, model)
-    return Prediction(alternative, True, risk.as_dict(), risk.value(scenario.risk.ordering), "", plan)
+    return Prediction(alternative, True, risk.as_dict(), risk.value(scenario.risk.ordering), "", plan, risk)
+
+
+def check_predictions(
+    scenario: Scenario,
+    predictions: dict[str, Prediction],
+    run_map: Callable[[Sequence[RolloutJob]], list[dict[str, Any]]],
+    log: Callable[[str], Any] = print,
+) -> dict[str, Prediction]:
+    """The predictions after the physics check (:mod:`executive.risk.rollouts`) on the estimate.
+
+    A fused alternative carries the fused risk and value. One whose dry run failed keeps its
+    analytic risk but has no value (the executive would never run it); its trials still run,
+    so the campaign measures it all the same.
+    """
+    from executive.risk.rollouts import check_alternatives
+
+    feasible = {n: p for n, p in predictions.items() if p.feasible and p.assessed is not None}
+    if not feasible:
+        return predictions
+    cfg = scenario.risk.rollouts
+    rolls = f", then up to {cfg.count} rollouts each" if cfg.count else ""
+    log(f"checking {', '.join(feasible)} in physics: a dry run on the estimate{rolls}")
+    plans = {n: p.plan for n, p in feasible.items()}
+    verdict = check_alternatives(plans, {n: p.assessed for n, p in feasible.items()}, scenario, run_map)
+    out = dict(predictions)
+    for name, result in verdict.alternatives.items():
+        physics = result.as_dict(cfg.confidence)
+        if not result.dry_run_ok:
+            out[name] = dataclasses.replace(
+                out[name], value=None, error=result.dry_run_reason(), physics=physics
+            )
+            continue
+        risk = result.risk
+        out[name] = dataclasses.replace(
+            out[name], risk=risk.as_dict(), value=risk.value(scenario.risk.ordering), physics=physics
+        )
+    if verdict.stopped != "off":
+        log(f"  rollouts: {verdict.rollouts} per alternative, stopped by {verdict.stopped}")
+    return out
+
+
+def _prediction_text(p: Prediction, ordering: str) -> str:
+    if not p.feasible or p.risk is None:
+        return f"infeasible: {p.error}"
+    if p.value is None:
+        return f"never chosen: {p.error}"
+    return f"P(any) {p.risk['combined']:.4f}  {ordering} {p.value:.4f}"
 
 
 def trial_seed(base_seed: int, index: int) -> int:
@@ -431,6 +482,22 @@ class _Runner:
             for spec in work:
                 yield _trial_in_worker(spec)
 
+    def use(self, predictions: dict[str, Prediction]) -> dict[str, Prediction]:
+        """Trials run these predictions' plans (and records carry their risk) from now on."""
+        self._predictions = dict(predictions)
+        return self._predictions
+
+    def run_jobs(self, jobs: Sequence[RolloutJob]) -> list[dict[str, Any]]:
+        """Physics jobs (dry runs, rollouts) on the campaign's backend, records in order."""
+        from executive.risk.rollouts import run_job
+
+        if self._ray is not None:
+            remote = self._ray.remote(run_job)
+            return list(self._ray.get([remote.remote(job) for job in jobs]))
+        if self._pool is not None:
+            return list(self._pool.map(run_job, jobs, chunksize=1))
+        return [run_job(job) for job in jobs]
+
     def close(self, *, terminate: bool = False) -> None:
         if self._pool is not None:
             if terminate:
@@ -494,14 +561,17 @@ def summarise(
             keys = ("collision", "fall", "grasp", "combined", "weighted_sum", "expected_loss")
             predicted = {k: float(np.mean([r["predicted"][k] for r in mine])) for k in keys}
             # the number the selector ranked by (fused with the rollouts when they ran)
-            predicted["value"] = float(
-                np.mean([r["predicted"].get("value", r["predicted"][ordering]) for r in mine])
-            )
+            # (None: the executive would never run it, its dry run failed)
+            values = [r["predicted"].get("value", r["predicted"][ordering]) for r in mine]
+            predicted["value"] = None if None in values else float(np.mean(values))
         per_alt.append(
             {
                 "name": name,
                 "feasible": bool(prediction.feasible) if prediction else None,
-                "error": prediction.error if prediction and not prediction.feasible else "",
+                "error": prediction.error
+                if prediction and (not prediction.feasible or prediction.value is None)
+                else "",
+                "physics": prediction.physics if prediction else None,
                 "trials": n,
                 "errors": sum(r["outcome"] == "error" for r in records if r["alternative"] == name),
                 "infeasible": sum(r["outcome"] == "infeasible" for r in records if r["alternative"] == name),
@@ -792,18 +862,16 @@ def run_campaign(
         varied = not scenario.trials.scene_variation.is_zero()
         if varied:
             log("the scene varies from trial to trial (trials.scene_variation): each trial plans on its own")
+            log("  (its predictions are analytic: dry runs and rollouts check one fixed estimate)")
             if scenario.trials.scene_variation.varies_perception:
                 low, high = scenario.trials.scene_variation.perception_scale
                 log(f"  and so does the perception: pose sigmas x {low:g} to x {high:g} (log-uniform)")
         else:
             log(f"planning {', '.join(names)} on the estimate")
             predictions = runner.predict(names)
+            predictions = runner.use(check_predictions(scenario, predictions, runner.run_jobs, log))
         for name in predictions:
-            p = predictions[name]
-            if p.feasible and p.risk is not None:
-                log(f"  {name:<15} P(any) {p.risk['combined']:.4f}  {scenario.risk.ordering} {p.value:.4f}")
-            else:
-                log(f"  {name:<15} infeasible: {p.error}")
+            log(f"  {name:<15} {_prediction_text(predictions[name], scenario.risk.ordering)}")
         t_trials = time.perf_counter()
         bar = ProgressBar(len(records) + len(specs), done=len(records), stream=stream)
         bar.draw(force=True)

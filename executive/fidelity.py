@@ -25,7 +25,6 @@ variants or trials): every campaign resumes where it stopped.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import math
@@ -51,7 +50,6 @@ __all__ = [
     "table_markdown",
     "table_text",
     "variant_statistics",
-    "with_rollouts",
 ]
 
 # Each observed failure mode and the predicted probability that forecasts it (as a campaign's).
@@ -65,14 +63,6 @@ class FidelityResult:
     folder: Path
     summary: dict[str, Any]
     interrupted: bool = False
-
-
-def with_rollouts(scenario: Scenario, count: int) -> Scenario:
-    """``scenario`` with ``risk.rollouts.count = count`` (0: off); ``min_count`` kept <= count."""
-    rollouts = scenario.risk.rollouts
-    minimum = min(rollouts.min_count, count) if count > 0 else rollouts.min_count
-    rollouts = dataclasses.replace(rollouts, count=count, min_count=minimum)
-    return dataclasses.replace(scenario, risk=dataclasses.replace(scenario.risk, rollouts=rollouts))
 
 
 def check_folder(folder: Path) -> None:
@@ -204,6 +194,7 @@ def _run_variants(
     """Draw, write and run each variant's campaign; then the suite's statistics."""
     from executive.campaign import run_campaign
     from executive.progress_bar import format_duration
+    from executive.risk.rollouts import with_rollouts
     from executive.variants import make_variant, write_variant
 
     t0 = time.perf_counter()
@@ -307,7 +298,12 @@ def variant_statistics(
             }
         )
     ran = [a for a in alternatives if a["trials"]]
-    rho = spearman([a["predicted_value"] for a in ran], [a["failure_rate"] for a in ran]) if ran else math.nan
+    ranked = [a for a in ran if a["predicted_value"] is not None]  # None: its dry run failed
+    rho = (
+        spearman([a["predicted_value"] for a in ranked], [a["failure_rate"] for a in ranked])
+        if ranked
+        else math.nan
+    )
     result = regret(trial_table(records, names))
     status = "ok" if result.regret is not None else ("all_infeasible" if not ran else "no_comparison")
     return {

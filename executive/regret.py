@@ -113,7 +113,8 @@ def trial_table(records: Sequence[dict[str, Any]], alternatives: Sequence[str]) 
 
 def _value(record: dict[str, Any]) -> float:
     predicted = record["predicted"]
-    return float(predicted.get("value", predicted.get("expected_loss", math.inf)))
+    value = predicted.get("value", predicted.get("expected_loss"))
+    return math.inf if value is None else float(value)  # None: never chosen (its dry run failed)
 
 
 def choices(value: FloatArray) -> IntArray:

@@ -316,6 +316,11 @@ def _variant_document(
     }
     for item, (x, y, z) in zip(doc["mission"], targets, strict=True):
         item["transfer"]["to"] = [_r(x), _r(y)] if z is None else [_r(x), _r(y), _r(z)]
+    # The variant is one scene the executive estimates and decides on once (its physics check
+    # included); its trials vary the truth only.
+    trials = doc.get("trials")
+    if isinstance(trials, dict):
+        trials.pop("scene_variation", None)
     return doc
 
 

@@ -17,7 +17,6 @@ import numpy as np
 import pytest
 
 from executive.cli import main
-from executive.fidelity import with_rollouts
 from executive.regret import (
     TrialTable,
     newcombe_interval,
@@ -25,6 +24,7 @@ from executive.regret import (
     sign_test,
     trial_table,
 )
+from executive.risk.rollouts import with_rollouts
 from executive.scenario import load
 from executive.scenario_types import Scenario
 from executive.variants import (
