@@ -9,19 +9,20 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from typing import cast, get_args
 
 import numpy as np
 import py_trees
 
 from behaviours.robot_access import install
 from executive.composition import AlternativePlan, build_subtree, plan_alternative
-from executive.detectors import Failure, FailureDetector
+from executive.detectors import Failure, FailureDetector, FailureMode
 from executive.execution import SimulatedRobot
 from executive.planning import Planner, PlanningError
 from executive.scenario_types import Scenario, TransferTask
 from executive.world import World, build, sample_perturbation
 
-__all__ = ["RunResult", "execute_plan", "run_alternative"]
+__all__ = ["RunResult", "behaviour_failure", "execute_plan", "run_alternative"]
 
 Status = py_trees.common.Status
 
@@ -100,15 +101,27 @@ def execute_plan(
             result.outcome, result.failure, result.message = "failed", placed, placed.detail
     elif root.status == Status.FAILURE:
         tip = root.tip()
-        result.failure = robot.failure
+        feedback = tip.feedback_message if tip else ""
+        result.failure = robot.failure or behaviour_failure(feedback, float(truth.data.time))
         result.outcome = "failed"
-        result.message = f"{tip.name if tip else plan.name}: {tip.feedback_message if tip else ''}"
+        result.message = f"{tip.name if tip else plan.name}: {feedback}"
     else:
         robot.hold()
         tree.interrupt()
         result.message = f"not finished after {limit:.1f} s of simulated time"
     tree.shutdown()
     return result
+
+
+def behaviour_failure(feedback: str, time_s: float) -> Failure | None:
+    """The failure a behaviour reported itself (its message starts with the mode, ``drop: ...``).
+
+    None when the message names no failure mode (e.g. a hand that lost its track).
+    """
+    mode = feedback.split(":", 1)[0] if ":" in feedback else ""
+    if mode in get_args(FailureMode):
+        return Failure(cast(FailureMode, mode), feedback, time_s)
+    return None
 
 
 def run_alternative(

@@ -1,0 +1,110 @@
+"""Risk checked in physics before the robot moves: dry runs and rollouts in MuJoCo."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from executive.assessment import assess_task
+from executive.mission import Executive
+from executive.registry import scenario_path
+from executive.risk.rollouts import check_alternatives, estimate_scenario, run_job, with_rollouts
+from executive.scenario import load, loads
+from executive.scenario_types import Scenario
+from executive.world import build
+
+
+def _heavy_box(tmp_path: Path) -> Path:
+    """book_transfer with a 4 kg box: the giving arm sags under it and the receiver closes on air."""
+    doc = yaml.safe_load(scenario_path("book_transfer").read_text())
+    doc["name"] = "heavy_box"
+    doc["robot"] = "humanoid"
+    book = doc["scene"]["objects"][0]
+    book.update(size=[0.14, 0.10, 0.10], mass=4.0)
+    doc["risk"]["threshold"] = 100.0  # the gate is not what this test is about
+    path = tmp_path / "heavy_box.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def _lines(folder: Path) -> list[dict[str, Any]]:
+    return [json.loads(line) for line in (folder / "decisions.jsonl").read_text().splitlines()]
+
+
+def test_an_alternative_whose_dry_run_fails_is_never_executed(tmp_path: Path) -> None:
+    """The heavy box's handover plans, but fails in physics with truth = estimate; the executive
+    marks it infeasible with the detector's verdict and runs a one-arm alternative."""
+    executive = Executive(_heavy_box(tmp_path), approval="auto", truth="exact", out=tmp_path / "run")
+    executive.run()
+    lines = _lines(tmp_path / "run")
+    dry = {e["name"]: e for e in lines if e["kind"] == "dry_run"}
+    assert set(dry) == {"left", "right", "left_to_right"}
+    assert dry["left"]["ok"] and dry["right"]["ok"]
+    handover = dry["left_to_right"]
+    assert not handover["ok"] and handover["outcome"] == "drop"
+    assert handover["reason"].startswith("fails in simulation with the scene as estimated: ")
+    assert "does not hold" in handover["reason"]
+    plan = next(e for e in lines if e["kind"] == "plan" and e["name"] == "left_to_right")
+    assert not plan["feasible"] and plan["reason"] == handover["reason"]
+    executed = [e["alternative"] for e in lines if e["kind"] == "execute"]
+    assert executed and "left_to_right" not in executed
+    assert executive.outcome == "success"
+
+
+def _one_alternative(count: int) -> tuple[Scenario, dict[str, Any], dict[str, Any]]:
+    scenario = with_rollouts(load("book_transfer"), count)
+    scenario = dataclasses.replace(
+        scenario, mission=(dataclasses.replace(scenario.mission[0], alternatives=("left_to_right",)),)
+    )
+    world = build(scenario)
+    (alt,) = assess_task(world, scenario.mission[0])
+    assert alt.plan is not None and alt.risk is not None
+    return estimate_scenario(world), {alt.name: alt.plan}, {alt.name: alt.risk}
+
+
+def test_rollouts_are_seeded_and_fused_with_their_counts() -> None:
+    """Same seed, same truths, same counts; the fused risk is the posterior of those counts."""
+    scenario, plans, analytic = _one_alternative(3)
+    runs = [
+        check_alternatives(plans, analytic, scenario, lambda jobs: [run_job(j) for j in jobs])
+        for _ in range(2)
+    ]
+    first, second = (r.alternatives["left_to_right"] for r in runs)
+    assert first.counts == second.counts and sum(first.counts.values()) == 3
+    assert runs[0].stopped == "clear"  # one alternative: nothing to choose between once min_count is met
+    cfg = scenario.risk.rollouts
+    w, n = cfg.prior_weight, 3
+    drops = first.counts.get("drop", 0)
+    p_a = first.analytic.components["grasp"].probability
+    assert first.risk.components["grasp"].probability == pytest.approx((w * p_a + drops) / (w + n))
+
+
+def test_plan_cli_shows_the_dry_runs(capsys: pytest.CaptureFixture[str]) -> None:
+    from executive.cli import main
+
+    assert main(["plan", "book_transfer", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    rows = out["tasks"][0]["alternatives"]
+    assert all(r["physics"]["dry_run"]["outcome"] == "success" for r in rows)
+    assert all(r["physics"]["rollouts"] == 0 for r in rows)
+
+
+def test_bad_rollout_settings_are_located() -> None:
+    text = scenario_path("book_transfer").read_text()
+    from executive.errors import ScenarioError
+
+    with pytest.raises(ScenarioError, match=r"risk\.rollouts.*min_count"):
+        loads(
+            text.replace("  threshold: 0.3\n", "  threshold: 0.3\n  rollouts: {count: 4, min_count: 8}\n"),
+            source="x.yaml",
+        )
+    with pytest.raises(ScenarioError, match=r"risk\.rollouts\.confidence"):
+        loads(
+            text.replace("  threshold: 0.3\n", "  threshold: 0.3\n  rollouts: {confidence: 1.5}\n"),
+            source="x.yaml",
+        )
