@@ -100,6 +100,7 @@ class Prediction:
     plan: Any = field(default=None, repr=False)  # AlternativePlan (None when infeasible)
     assessed: Any = field(default=None, repr=False)  # CombinedRisk (None when infeasible)
     physics: dict[str, Any] | None = None  # the physics check's summary, when it ran
+    analytic: dict[str, float] | None = None  # the analytic risk and value, when rollouts fused it
 
 
 def predict(scenario: Scenario, task_index: int, alternative: str) -> Prediction:
@@ -151,9 +152,12 @@ def check_predictions(
                 out[name], value=None, error=result.dry_run_reason(), physics=physics
             )
             continue
-        risk = result.risk
+        risk, ordering = result.risk, scenario.risk.ordering
+        analytic = None
+        if result.fused is not None:
+            analytic = {**result.analytic.as_dict(), "value": result.analytic.value(ordering)}
         out[name] = dataclasses.replace(
-            out[name], risk=risk.as_dict(), value=risk.value(scenario.risk.ordering), physics=physics
+            out[name], risk=risk.as_dict(), value=risk.value(ordering), physics=physics, analytic=analytic
         )
     if verdict.stopped != "off":
         log(f"  rollouts: {verdict.rollouts} per alternative, stopped by {verdict.stopped}")
@@ -259,7 +263,7 @@ def run_trial(
         "failure": None,
         "placement_error_m": None,
         "sim_time_s": 0.0,
-        "predicted": None if prediction.risk is None else {**prediction.risk, "value": prediction.value},
+        "predicted": _predicted(prediction),
         "scene": shifts,
         "truth": _perturbation_json(asdict(perturbation)),
     }
@@ -308,6 +312,17 @@ def outcome_fields(result: RunResult) -> dict[str, Any]:
             "bodies": list(failure.bodies) if failure is not None else [],
             "force": round(failure.force, 3) if failure is not None else 0.0,
         }
+    return out
+
+
+def _predicted(prediction: Prediction) -> dict[str, Any] | None:
+    """A record's prediction: per-mode probabilities and the value ranked by; with rollouts,
+    the analytic prediction they were fused with under ``analytic``."""
+    if prediction.risk is None:
+        return None
+    out: dict[str, Any] = {**prediction.risk, "value": prediction.value}
+    if prediction.analytic is not None:
+        out["analytic"] = prediction.analytic
     return out
 
 

@@ -44,6 +44,7 @@ __all__ = [
     "check_grasps",
     "plan_alternative",
     "transfer_steps",
+    "yaw_of",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -106,7 +107,8 @@ def _top_down_quat(yaw: float) -> FloatArray:
     return quat
 
 
-def _yaw_of(quat: FloatArray) -> float:
+def yaw_of(quat: FloatArray) -> float:
+    """The z-y-x Euler yaw of a unit quaternion (w x y z)."""
     w, x, y, z = quat
     return float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
 
@@ -145,7 +147,7 @@ def transfer_steps(
     body = next(b for b in scene.objects if b.name == task.object)
     obj = body.name
     pos, quat = world.object_pose(obj)
-    yaw = _yaw_of(quat)
+    yaw = yaw_of(quat)
     top = pos[2] + body.half_height()
     grasp_z = max(pos[2], top - cfg.grip_depth)
     site_above_centre = grasp_z - pos[2]

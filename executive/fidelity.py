@@ -305,6 +305,7 @@ def variant_statistics(
         else math.nan
     )
     result = regret(trial_table(records, names))
+    analytic = regret(trial_table(analytic_view(records), names))
     status = "ok" if result.regret is not None else ("all_infeasible" if not ran else "no_comparison")
     return {
         "index": variant.index,
@@ -318,6 +319,7 @@ def variant_statistics(
         "alternatives": alternatives,
         "spearman": _finite(rho),
         "regret": result.as_dict(),
+        "regret_analytic": analytic.as_dict(),  # the same trials ranked by the analytic value alone
         "status": status,
     }
 
@@ -337,6 +339,19 @@ def _commonest_reason(records: Sequence[dict[str, Any]], alternative: str) -> st
     shapes = Counter(re.sub(r"[-+]?\d[\d.e-]*", "#", d) for d in details)
     commonest = shapes.most_common(1)[0][0]
     return next(d for d in details if re.sub(r"[-+]?\d[\d.e-]*", "#", d) == commonest)
+
+
+def analytic_view(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The records as the analytic models alone predicted them (before the rollouts were fused).
+
+    Records without rollouts are their own analytic view.
+    """
+    out = []
+    for r in records:
+        predicted = r.get("predicted") or {}
+        analytic = predicted.get("analytic")
+        out.append({**r, "predicted": analytic} if analytic is not None else r)
+    return out
 
 
 def pooled_statistics(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
@@ -408,6 +423,10 @@ def _suite_summary(
         "trials_executed": sum(r["outcome"] not in ("infeasible", "error") for r in records),
         "pooled": pooled_statistics(records),
         "regret": _regret_overall(rows),
+        "analytic": {  # the same trials, ranked and scored by the analytic models alone
+            "pooled": pooled_statistics(analytic_view(records)),
+            "regret": _regret_overall([{**r, "regret": r["regret_analytic"]} for r in rows]),
+        },
         "wall_s": wall_s,
         "regret_method": "cross-fitted on even/odd trials; Newcombe (1998) interval; exact sign test, 5%",
         "per_variant": rows,
@@ -517,17 +536,11 @@ def _rows(summary: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
 
 
 def _footer(summary: dict[str, Any]) -> list[str]:
-    r = summary["regret"]
-    pooled = r["pooled"]
+    lines = _regret_lines(summary["regret"], "")
+    if summary.get("rollouts"):
+        lines += _regret_lines(summary["analytic"]["regret"], "analytic models alone (no rollouts): ")
     return [
-        "regret (cross-fitted, per-trial choice minus best fixed alternative): "
-        f"mean {_num(r['mean'], '+.3f')} "
-        f"over {r['variants_scored']} variant(s) (in-sample, biased high: {_num(r['mean_naive'], '+.3f')}); "
-        f"significantly above zero in {r['significant_above_zero']}, below in {r['significant_below_zero']} "
-        "(exact sign test, 5%; marked *)",
-        f"all trials pooled: regret {_num(pooled['regret'], '+.3f')} over {pooled['trials']} trials, "
-        f"discordant {pooled['discordant'][0]} (only the choice failed) vs {pooled['discordant'][1]} "
-        f"(only the best failed), p {pooled['p_value']:.3f}",
+        *lines,
         f"{summary['variants_run']} variant(s), {summary['redraws']} invalid scene(s) redrawn, "
         f"{summary['all_infeasible_variants']} with no feasible alternative; "
         f"{summary['trials_executed']} trials in physics; wall time {summary['wall_s']:.0f} s",
@@ -540,6 +553,20 @@ def _footer(summary: dict[str, Any]) -> list[str]:
     ]
 
 
+def _regret_lines(r: dict[str, Any], label: str) -> list[str]:
+    pooled = r["pooled"]
+    return [
+        f"{label}regret (cross-fitted, per-trial choice minus best fixed alternative): "
+        f"mean {_num(r['mean'], '+.3f')} "
+        f"over {r['variants_scored']} variant(s) (in-sample, biased high: {_num(r['mean_naive'], '+.3f')}); "
+        f"significantly above zero in {r['significant_above_zero']}, below in {r['significant_below_zero']} "
+        "(exact sign test, 5%; marked *)",
+        f"{label}all trials pooled: regret {_num(pooled['regret'], '+.3f')} over {pooled['trials']} trials, "
+        f"discordant {pooled['discordant'][0]} (only the choice failed) vs {pooled['discordant'][1]} "
+        f"(only the best failed), p {pooled['p_value']:.3f}",
+    ]
+
+
 def table_text(summary: dict[str, Any]) -> str:
     """The suite's results as aligned text (what ``executive fidelity`` prints)."""
     header, rows = _rows(summary)
@@ -547,14 +574,22 @@ def table_text(summary: dict[str, Any]) -> str:
     lines = [
         "  ".join(c.ljust(w) for c, w in zip(line, widths, strict=True)).rstrip() for line in [header, *rows]
     ]
-    lines.append("")
-    lines.append("pooled   events / trials   ROC AUC   Brier    ECE")
-    for mode, m in summary["pooled"].items():
-        lines.append(
-            f"{mode:<9}{m['events']:>6} / {m['trials']:<9}{_num(m['auc'], '.3f'):>8}"
-            f"{_num(m['brier'], '.4f'):>9}{_num(m['ece'], '.4f'):>8}   (by P({m['predicted_by']}))"
-        )
+    for label, pooled in _pooled_tables(summary):
+        lines += ["", f"{label:<9}events / trials   ROC AUC   Brier    ECE"]
+        for mode, m in pooled.items():
+            lines.append(
+                f"{mode:<9}{m['events']:>6} / {m['trials']:<9}{_num(m['auc'], '.3f'):>8}"
+                f"{_num(m['brier'], '.4f'):>9}{_num(m['ece'], '.4f'):>8}   (by P({m['predicted_by']}))"
+            )
     return "\n".join([*lines, "", *_footer(summary)])
+
+
+def _pooled_tables(summary: dict[str, Any]) -> list[tuple[str, dict[str, Any]]]:
+    """The pooled statistics to show: as ranked, and (with rollouts) the analytic models' alone."""
+    tables = [("pooled", summary["pooled"])]
+    if summary.get("rollouts"):
+        tables.append(("analytic", summary["analytic"]["pooled"]))
+    return tables
 
 
 def table_markdown(summary: dict[str, Any]) -> str:
@@ -562,14 +597,15 @@ def table_markdown(summary: dict[str, Any]) -> str:
     header, rows = _rows(summary)
     out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
     out += ["| " + " | ".join(r) + " |" for r in rows]
-    out += [
-        "",
-        "| failure mode | predicted by | events | trials | ROC AUC | Brier | ECE |",
-        "|---|---|---:|---:|---:|---:|---:|",
-    ]
-    for mode, m in summary["pooled"].items():
-        out.append(
-            f"| {mode} | P({m['predicted_by']}) | {m['events']} | {m['trials']} | {_num(m['auc'], '.3f')} "
-            f"| {_num(m['brier'], '.4f')} | {_num(m['ece'], '.4f')} |"
-        )
+    for label, pooled in _pooled_tables(summary):
+        out += [
+            "",
+            f"| failure mode ({label}) | predicted by | events | trials | ROC AUC | Brier | ECE |",
+            "|---|---|---:|---:|---:|---:|---:|",
+        ]
+        for mode, m in pooled.items():
+            out.append(
+                f"| {mode} | P({m['predicted_by']}) | {m['events']} | {m['trials']} "
+                f"| {_num(m['auc'], '.3f')} | {_num(m['brier'], '.4f')} | {_num(m['ece'], '.4f')} |"
+            )
     return "\n".join([*out, "", *_footer(summary)])

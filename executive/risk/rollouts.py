@@ -87,12 +87,13 @@ def estimate_scenario(world: World) -> Scenario:
     Objects are put where the estimate has them now (position, yaw); the trial-to-trial scene
     variation is dropped: the rollouts' truths are sampled around this one estimate.
     """
+    from executive.composition import yaw_of
+
     scenario = world.scenario
     objects = []
     for body in scenario.scene.objects:
         pos, quat = world.object_pose(body.name)
-        w, x, y, z = quat
-        yaw = float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))  # z-y-x Euler yaw
+        yaw = yaw_of(quat)
         roll, pitch, _ = body.orientation_rad
         position = (float(pos[0]), float(pos[1]), float(pos[2]))
         objects.append(dataclasses.replace(body, position=position, orientation_rad=(roll, pitch, yaw)))
@@ -334,6 +335,12 @@ def _init_worker() -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
 
 
+def _warm_up() -> None:
+    """Import what a job runs (a worker's first job would pay for it)."""
+    import executive.campaign
+    import executive.runner  # noqa: F401
+
+
 class RolloutPool:
     """Warm worker processes that run :class:`RolloutJob` s; call it with jobs, get records.
 
@@ -356,6 +363,12 @@ class RolloutPool:
                 self.jobs, mp_context=ctx, initializer=_init_worker
             )
         return self._pool
+
+    def warm(self) -> list[concurrent.futures.Future[None]]:
+        """Start the workers and have each import the physics (returns at once; the futures
+        finish when they are ready)."""
+        pool = self.start()
+        return [pool.submit(_warm_up) for _ in range(self.jobs)]
 
     def __call__(self, jobs: Sequence[RolloutJob]) -> list[dict[str, Any]]:
         pool = self.start()
