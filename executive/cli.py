@@ -183,17 +183,22 @@ def _run_one(scenario: Scenario, args: argparse.Namespace) -> int:
 
 def _cmd_plan(args: argparse.Namespace) -> int:
     from executive.assessment import assess_task
-    from executive.report import risk_json
+    from executive.report import risk_json, risk_table
     from executive.risk.rollouts import PhysicsCheck, with_rollouts
 
     scenario = with_rollouts(_load(args.scenario), args.rollouts)
     world = build(scenario)
     tasks = []
     physics = PhysicsCheck(scenario.risk.rollouts.jobs)
+    physics.pool.warm()  # the workers start while the planner works
     try:
         for i, task in enumerate(scenario.mission):
             label = f"{i}: transfer {task.object}"
-            alternatives, _ = physics.check(world, assess_task(world, task))
+            analytic = assess_task(world, task)
+            if not args.json:  # the analytic answer at once, the physics check's after it
+                print(risk_table(scenario, f"{label}, analytic", analytic))
+                print(_checking_text(scenario, analytic), flush=True)
+            alternatives, _ = physics.check(world, analytic)
             tasks.append((label, alternatives))
             _print_plan(args, scenario, world, i, label, alternatives)
     finally:
@@ -201,6 +206,13 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     if args.json:
         print(risk_json(scenario, tasks))
     return EXIT_OK
+
+
+def _checking_text(scenario: Scenario, analytic: list[AlternativeRisk]) -> str:
+    feasible = [a.name for a in analytic if a.feasible]
+    n = scenario.risk.rollouts.count
+    rolls = f" and up to {n} rollouts each on sampled truths" if n else ""
+    return f"checking {', '.join(feasible) or 'nothing'} in physics: a dry run on the estimate{rolls} ..."
 
 
 def _print_plan(

@@ -177,10 +177,10 @@ class RolloutConfig:
     The dry run (each alternative once on the estimate) always runs; it is not configured here.
     """
 
-    count: int = 0  # most rollouts per alternative; 0: off (the dry runs still run)
-    min_count: int = 8  # rollouts per alternative before the stopping rule may stop
+    count: int = 4  # most rollouts per alternative; 0: off (the dry runs still run)
+    min_count: int = 4  # rollouts per alternative before the stopping rule may stop
     batch: int = 4  # rollouts per alternative per round
-    budget_s: float = 60.0  # s of wall time for all rollouts of one decision
+    budget_s: float = 30.0  # s of wall time for all rollouts of one decision
     confidence: float = 0.95  # posterior probability at which the stopping rule calls the choice clear
     indifference: float = 0.05  # in the ordering's units: a choice this close to the best is as good
     prior_weight: float = 10.0  # pseudo-trials the analytic prediction counts for

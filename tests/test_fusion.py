@@ -64,19 +64,28 @@ def test_choice_confidence_of_two_alternatives_against_quadrature() -> None:
     a = [ModePosterior("grasp", 3.0, 27.0, 1.0)]
     b = [ModePosterior("grasp", 9.0, 21.0, 1.0)]
     delta = 0.02
-    best, confidence = choice_confidence({"a": a, "b": b}, "probability", delta, draws=200_000, seed=1)
+    best, confidence, cost = choice_confidence({"a": a, "b": b}, "probability", delta, draws=200_000, seed=1)
     exact, _ = integrate.quad(
         lambda x: stats.beta.pdf(x, 3.0, 27.0) * stats.beta.sf(x - delta, 9.0, 21.0), 0.0, 1.0
     )
     assert best == "a"
     assert confidence == pytest.approx(exact, abs=0.004)
+    # expected opportunity cost E[max(0, X_a - X_b)] = int int max(0, x - y) f_a(x) f_b(y)
+    eoc, _ = integrate.dblquad(
+        lambda y, x: max(0.0, x - y) * stats.beta.pdf(x, 3.0, 27.0) * stats.beta.pdf(y, 9.0, 21.0),
+        0.0,
+        1.0,
+        0.0,
+        lambda x: x,
+    )
+    assert cost == pytest.approx(eoc, rel=0.05)
 
 
 def test_choice_confidence_ranks_by_expected_loss_with_severities() -> None:
     """A likelier but cheap failure against a rarer but costly one: the loss decides."""
     cheap = [ModePosterior("grasp", 20.0, 80.0, 1.0)]  # 0.20 x 1
     costly = [ModePosterior("fall", 10.0, 90.0, 10.0)]  # 0.10 x 10
-    best, confidence = choice_confidence({"cheap": cheap, "costly": costly}, "expected_loss", 0.0, seed=3)
+    best, confidence, _ = choice_confidence({"cheap": cheap, "costly": costly}, "expected_loss", 0.0, seed=3)
     assert best == "cheap" and confidence > 0.95
-    best, _ = choice_confidence({"cheap": cheap, "costly": costly}, "probability", 0.0, seed=3)
+    best, _, _ = choice_confidence({"cheap": cheap, "costly": costly}, "probability", 0.0, seed=3)
     assert best == "costly"

@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from scipy import stats
@@ -24,7 +25,7 @@ from scipy import stats
 from executive.risk.combine import CombinedRisk, combine
 from executive.scenario_types import RiskConfig
 
-__all__ = ["OBSERVED_AS", "ModePosterior", "choice_confidence", "fuse", "posteriors"]
+__all__ = ["OBSERVED_AS", "Choice", "ModePosterior", "choice_confidence", "fuse", "posteriors"]
 
 #: The rollout outcomes that count as failures of each analytic mode. The detector's
 #: ``unstable`` (a simulation that blew up, a robot no longer controlled) counts as a fall:
@@ -117,6 +118,14 @@ def _values(post: Sequence[ModePosterior], ordering: str, draws: int, rng: np.ra
     return 1.0 - np.prod(1.0 - p, axis=0)  # probability of any failure (also for weighted_sum)
 
 
+class Choice(NamedTuple):
+    """The stopping rule's view of a decision under the posterior."""
+
+    best: str  # the alternative with the lowest posterior mean value
+    confidence: float  # P(best is within the indifference of the truly lowest)
+    opportunity_cost: float  # E[value(best) - min over alternatives]: what choosing it costs on average
+
+
 def choice_confidence(
     candidates: Mapping[str, Sequence[ModePosterior]],
     ordering: str,
@@ -124,12 +133,14 @@ def choice_confidence(
     *,
     draws: int = 4000,
     seed: int = 0,
-) -> tuple[str, float]:
-    """The alternative with the lowest posterior mean value, and P(it is within ``indifference`` of the best).
+) -> Choice:
+    """The current choice under the posterior: its confidence and expected opportunity cost.
 
-    The probability is estimated from ``draws`` joint posterior samples (seeded). The seed's
-    weighted sum is no probability; with ``ordering == "weighted_sum"`` the rule judges the
-    probability of any failure instead.
+    The expected opportunity cost is Chick & Inoue's (Operations Research 49(5), 2001): the
+    loss expected from choosing ``best`` instead of the alternative that is truly lowest. Both
+    are estimated from ``draws`` joint posterior samples (seeded). The seed's weighted sum is
+    no probability; with ``ordering == "weighted_sum"`` the rule judges the probability of any
+    failure instead.
 
     Raises:
         ValueError: no candidates.
@@ -140,5 +151,5 @@ def choice_confidence(
     names = list(candidates)
     samples = np.stack([_values(candidates[name], ordering, draws, rng) for name in names])
     best = int(np.argmin(samples.mean(axis=1)))
-    clear = samples[best] <= samples.min(axis=0) + indifference
-    return names[best], float(clear.mean())
+    shortfall = samples[best] - samples.min(axis=0)
+    return Choice(names[best], float((shortfall <= indifference).mean()), float(shortfall.mean()))

@@ -15,6 +15,12 @@ Sources (one line each):
   hard finger = point contact with friction [f_n, f_t, f_o], soft finger [f_n, f_t, f_o, m_n].
 - Quality: sigma_min(G) (Li & Sastry 1988) and isotropy sigma_min / sigma_max (Kim et al. 2004;
   the inverse of the condition number the seed's Q relates to).
+- Jaws' approach (the box's face between two pads): a box of half-width b turned by t about its
+  centre (c along the jaws, l across them) has its face at y = c + b / cos t + tan t (x - l)
+  (plane geometry; Ericson, "Real-Time Collision Detection", 2005, 4.4: a convex polygon meets a
+  half-plane iff one of its vertices does), so a pad corner (x, y) outside it is hit iff
+  u = c - l tan t > y - x tan t - b / cos t; given t, u ~ N(0, s^2 (1 + tan^2 t)); t by
+  Gauss-Hermite quadrature.
 - Shake validation (DESIGN.md, "Grasp"; the seed's sinusoidal excitation): oscillate the wrist
   servos' targets q0 + A sin(2 pi f t) and watch the object in the hand frame.
 """

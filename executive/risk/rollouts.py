@@ -228,6 +228,7 @@ class PhysicsVerdict:
     rollouts: int = 0  # per surviving alternative
     stopped: str = "off"
     confidence: float | None = None  # the stopping rule's last P(choice within the indifference)
+    opportunity_cost: float | None = None  # and the expected extra loss of that choice
     dry_run_s: float = 0.0
     rollout_s: float = 0.0
 
@@ -236,6 +237,7 @@ class PhysicsVerdict:
             "rollouts": self.rollouts,
             "stopped": self.stopped,
             "choice_confidence": self.confidence,
+            "opportunity_cost": self.opportunity_cost,
             "dry_run_s": self.dry_run_s,
             "rollout_s": self.rollout_s,
         }
@@ -310,25 +312,27 @@ def _roll_out(
         for plan in plans:
             results[plan.name].rollouts = n
         if n >= cfg.min_count:
-            verdict.confidence = _confidence(results, plans, risk, n)
+            verdict.confidence, verdict.opportunity_cost = _choice(results, plans, risk, n)
             if verdict.confidence >= cfg.confidence:
                 verdict.stopped = "clear"
                 break
     verdict.rollouts, verdict.rollout_s = n, clock() - t0
 
 
-def _confidence(
+def _choice(
     results: Mapping[str, PhysicsResult], plans: Sequence[AlternativePlan], risk: RiskConfig, n: int
-) -> float:
-    """The stopping rule's P(the current best is within the indifference of the best)."""
+) -> tuple[float, float]:
+    """The stopping rule's P(the current best is within the indifference of the best), and the
+    expected opportunity cost of choosing it."""
     if len(plans) == 1:
-        return 1.0
+        return 1.0, 0.0
     cfg = risk.rollouts
     candidates = {
         p.name: posteriors(results[p.name].analytic, results[p.name].counts, n, cfg.prior_weight)
         for p in plans
     }
-    return choice_confidence(candidates, risk.ordering, cfg.indifference, seed=n)[1]
+    choice = choice_confidence(candidates, risk.ordering, cfg.indifference, seed=n)
+    return choice.confidence, choice.opportunity_cost
 
 
 def _init_worker() -> None:
