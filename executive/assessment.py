@@ -37,7 +37,14 @@ from executive.planning import Planner, PlanningError, Trajectory
 from executive.risk.collision import CollisionModel, CollisionProfile, KnotDistance, report_from_profile
 from executive.risk.combine import CombinedRisk, combine
 from executive.risk.fall import assess_fall
-from executive.risk.grasp import GraspTolerance, assess_grasp, grasp_error, grasp_tolerance, hand_pose_at
+from executive.risk.grasp import (
+    GraspTolerance,
+    approach_envelope,
+    assess_grasp,
+    grasp_error,
+    grasp_tolerance,
+    hand_pose_at,
+)
 from executive.risk.hold import assess_hold
 from executive.risk.report import RiskReport
 from executive.scenario_types import TransferTask
@@ -111,7 +118,14 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
     collision = _collision(collision_model, plan)
     grasp_step = next(s for s in plan.steps if s.kind == "grasp")
     approach = [s for s in plan.steps[: plan.steps.index(grasp_step)] if s.name in plan.trajectories][-1]
-    grasp = _grasp(world, grasp_step.side, plan.task.object, plan.trajectories[approach.name])
+    down = [
+        plan.trajectories[s.name].qpos
+        for s in plan.steps[: plan.steps.index(grasp_step)]
+        if s.name in plan.trajectories and s.side == grasp_step.side
+    ]
+    grasp = _grasp(
+        world, grasp_step.side, plan.task.object, plan.trajectories[approach.name], np.concatenate(down)
+    )
     hold = assess_hold(world, plan, scenario.risk, scenario.uncertainty)
     return combine([collision, fall, drop_union(grasp, hold)], scenario.risk)
 
@@ -137,7 +151,7 @@ def drop_union(grasp: RiskReport, hold: RiskReport) -> RiskReport:
     )
 
 
-def _grasp(world: World, side: str, obj: str, approach: Trajectory) -> RiskReport:
+def _grasp(world: World, side: str, obj: str, approach: Trajectory, path: np.ndarray) -> RiskReport:
     """Grasp risk measured from the grasp point the plan intends, not the object's centre.
 
     A handover grasps the object off-centre on purpose; that planned offset is no error,
@@ -149,6 +163,12 @@ def _grasp(world: World, side: str, obj: str, approach: Trajectory) -> RiskRepor
     ``place_position_tol``; the same error ``e`` fails the grasp when ``|e|`` exceeds the
     lateral tolerance, so the union of the two is ``|e| > min(lateral, place_position_tol)``
     (exact: nested events of one Gaussian, not a bound).
+
+    Across the jaws, the hand must clear the object's sides all the way down, not only at
+    the grasp pose: ``path`` (the grasping hand's poses before the grasp, e.g. its pre-grasp
+    and approach knots) gives the envelope its geoms sweep below the object's top
+    (:func:`executive.risk.grasp.approach_envelope`), and the offset and yaw errors are
+    scored jointly against it (:func:`executive.risk.grasp.approach_miss_probability`).
     """
     scenario = world.scenario
     hand_pos, hand_rot = hand_pose_at(world, approach, side)
@@ -173,6 +193,7 @@ def _grasp(world: World, side: str, obj: str, approach: Trajectory) -> RiskRepor
         scenario.uncertainty,
         object_pose=(reference, obj_quat),
         tolerance=tolerance,
+        approach=approach_envelope(world, side, obj, path),
     )
 
 

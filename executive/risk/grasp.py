@@ -36,17 +36,26 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.special import expit
 
 from executive.planning_timing import Trajectory
-from executive.risk.gaussian import exceed_probability, gauss_hermite_normal, independent_union, union_bounds
+from executive.risk.gaussian import (
+    exceed_probability,
+    gauss_hermite_normal,
+    independent_union,
+    normal_cdf,
+    union_bounds,
+)
 from executive.risk.report import RiskReport
 from executive.scenario_types import GraspRiskConfig, RiskConfig, Uncertainty
 from executive.world import World
 
 __all__ = [
     "CONTACT_MODELS",
+    "ApproachEnvelope",
     "GraspError",
     "GraspQuality",
     "GraspTolerance",
     "ShakeResult",
+    "approach_envelope",
+    "approach_miss_probability",
     "assess_grasp",
     "expected_seed_risk",
     "grasp_error",
@@ -309,6 +318,137 @@ def expected_seed_risk(
     return float(np.clip(expected, 0.0, 1.0))
 
 
+@dataclass(frozen=True)
+class ApproachEnvelope:
+    """Where a hand's collision geoms pass beside an object on their way down to grasp it.
+
+    Coordinates are in the object's planned (estimated) horizontal frame, m: x along its
+    lateral axis (across the jaws' closing direction), y along its closing axis. Only the
+    corners of geoms that are below the object's top face at a knot are kept.
+
+    Attributes:
+        side_a: (n, 2) corners (x, y) with y > 0 (beside the object's +y face).
+        side_b: (m, 2) corners with y <= 0 (beside its -y face).
+        half_width: the object's half extent b along its closing axis.
+    """
+
+    side_a: FloatArray
+    side_b: FloatArray
+    half_width: float
+
+    def clearances(self, yaw: ArrayLike) -> tuple[FloatArray, FloatArray]:
+        """Largest u = c - l tan t that keeps off each face, for object yaw errors t (rad).
+
+        Returns (hi, lo): the approach misses the object iff lo < u < hi; hi is +inf (lo -inf)
+        when no geom goes below the top on that side.
+        """
+        t = np.atleast_1d(np.asarray(yaw, dtype=float))
+        tan, sec = np.tan(t), 1.0 / np.cos(t)
+        hi = np.full(t.shape, np.inf)
+        lo = np.full(t.shape, -np.inf)
+        if len(self.side_a):
+            hi = np.min(self.side_a[:, 1][None, :] - np.outer(tan, self.side_a[:, 0]), axis=1)
+        if len(self.side_b):
+            lo = np.max(self.side_b[:, 1][None, :] - np.outer(tan, self.side_b[:, 0]), axis=1)
+        return hi - self.half_width * sec, lo + self.half_width * sec
+
+
+def _hand_collision_geoms(world: World, side: str) -> list[int]:
+    model = world.model
+    bodies = set(world.ids.hand_bodies[side])
+    return [
+        g
+        for g in range(model.ngeom)
+        if int(model.geom_bodyid[g]) in bodies and (model.geom_contype[g] or model.geom_conaffinity[g])
+    ]
+
+
+def _geom_corners(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> FloatArray:
+    """World corners (8, 3) of a geom's local bounding box (the box itself for a box geom)."""
+    centre, half = model.geom_aabb[geom, :3], model.geom_aabb[geom, 3:]
+    signs = np.array([[i, j, k] for i in (-1.0, 1.0) for j in (-1.0, 1.0) for k in (-1.0, 1.0)])
+    rot = data.geom_xmat[geom].reshape(3, 3)
+    return np.asarray(data.geom_xpos[geom] + (centre + signs * half) @ rot.T, dtype=float)
+
+
+def approach_envelope(
+    world: World,
+    side: str,
+    obj: str,
+    qpos_path: ArrayLike,
+    *,
+    closing_axis_object: ArrayLike = (0.0, 1.0, 0.0),
+) -> ApproachEnvelope:
+    """The corners of the ``side`` hand's geoms beside ``obj`` over a path of robot poses.
+
+    Args:
+        world: the estimate; the object's pose is taken from ``world.data``.
+        side: the grasping arm.
+        obj: the object to be grasped (a box; other shapes use their extent along the axes).
+        qpos_path: (k, nq) full-model poses the hand passes through on its way to the grasp
+            (e.g. the knots of the pre-grasp and approach trajectories).
+        closing_axis_object: the object-frame axis the jaws close along.
+
+    Returns:
+        The envelope; its corners are those of geoms whose lowest corner is below the
+        object's top face at that pose.
+    """
+    model = world.model
+    geom = world.ids.object_geoms[obj]
+    rot = world.data.geom_xmat[geom].reshape(3, 3)
+    c_axis = np.asarray(closing_axis_object, dtype=float).reshape(3)
+    c_axis = c_axis / np.linalg.norm(c_axis)
+    y_world = rot @ c_axis
+    y_world[2] = 0.0
+    y_world /= np.linalg.norm(y_world)
+    x_world = np.array([y_world[1], -y_world[0], 0.0])
+    centre = world.data.geom_xpos[geom].copy()
+    top = float(centre[2] + half_extent(model, geom, rot.T @ np.array([0.0, 0.0, 1.0])))
+    data = mujoco.MjData(model)
+    geoms = _hand_collision_geoms(world, side)
+    corners: list[FloatArray] = []
+    for q in np.asarray(qpos_path, dtype=float).reshape(-1, model.nq):
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        for g in geoms:
+            pts = _geom_corners(model, data, g)
+            if float(pts[:, 2].min()) < top:
+                rel = pts - centre
+                corners.append(np.column_stack([rel @ x_world, rel @ y_world]))
+    flat = np.concatenate(corners) if corners else np.zeros((0, 2))
+    width = half_extent(model, geom, c_axis)
+    return ApproachEnvelope(flat[flat[:, 1] > 0.0], flat[flat[:, 1] <= 0.0], float(width))
+
+
+def approach_miss_probability(
+    envelope: ApproachEnvelope, position_sigma: float, yaw_sigma: float, order: int = 32
+) -> tuple[float, float, float]:
+    """P(a hand geom meets the object's side on the way down) for a Gaussian object pose error.
+
+    The object's horizontal position error is N(0, position_sigma^2) per axis and its yaw
+    error N(0, yaw_sigma^2), independent. Given the yaw t, u = c - l tan t is
+    N(0, position_sigma^2 / cos^2 t) and the approach misses the object iff lo(t) < u < hi(t)
+    (:meth:`ApproachEnvelope.clearances`); the yaw is integrated by Gauss-Hermite quadrature
+    of ``order`` nodes. Valid while the pads pass beside the object's long faces (the yaw
+    does not bring a face's end under them).
+
+    Returns:
+        (probability, p_a, p_b): the total and the parts from the +y and -y faces.
+    """
+    if position_sigma < 0.0 or yaw_sigma < 0.0:
+        raise ValueError(f"approach_miss_probability: sigmas must be >= 0, got {position_sigma}, {yaw_sigma}")
+    z, w = gauss_hermite_normal(order) if yaw_sigma > 0.0 else (np.zeros(1), np.ones(1))
+    t = np.clip(yaw_sigma * z, -1.5, 1.5)
+    hi, lo = envelope.clearances(t)
+    if position_sigma > 0.0:
+        s = position_sigma / np.cos(t)
+        p_a, p_b = normal_cdf(-hi / s), normal_cdf(lo / s)
+    else:
+        p_a, p_b = (hi <= 0.0).astype(float), (lo >= 0.0).astype(float)
+    p = np.where(lo >= hi, 1.0, np.minimum(1.0, p_a + p_b))
+    return float(w @ p), float(w @ p_a), float(w @ p_b)
+
+
 def hand_pose_at(
     world: World, trajectory: Trajectory, side: str, knot: int = -1
 ) -> tuple[FloatArray, FloatArray]:
@@ -331,6 +471,7 @@ def assess_grasp(
     object_pose: tuple[ArrayLike, ArrayLike] | None = None,
     tolerance: GraspTolerance | None = None,
     closing_axis_object: ArrayLike = (0.0, 1.0, 0.0),
+    approach: ApproachEnvelope | None = None,
 ) -> RiskReport:
     """Grasp risk of closing the ``side`` hand at ``hand_pose`` (site position, 3x3 rotation) on ``obj``.
 
@@ -341,6 +482,11 @@ def assess_grasp(
     probability: 1 - prod(1 - p_axis) over the closing, lateral and yaw tolerances
     (independent axes), bounds max p <= P <= min(1, sum p); seed_score: the expected seed
     risk (eq. 2 weighted sum); severity: ``risk_config.severity.drop``.
+
+    approach: the hand's path down to the grasp (:func:`approach_envelope`). Given, the
+    closing and yaw tolerances are replaced by the joint event that a hand geom meets the
+    object's side anywhere on that path (:func:`approach_miss_probability`, offset and yaw
+    together); its union with the lateral failure is taken as independent.
     """
     if object_pose is None:
         position, quat = world.object_pose(obj)
@@ -361,6 +507,15 @@ def assess_grasp(
     )
     tol = tolerance or grasp_tolerance(world, side, obj, closing_axis_object=closing_axis_object)
     p_axes = tolerance_probabilities(err, tol, uncertainty.object_position, uncertainty.object_yaw_rad)
+    extra: dict[str, float] = {}
+    if approach is not None:
+        p_jaws, p_a, p_b = approach_miss_probability(
+            approach, uncertainty.object_position, uncertainty.object_yaw_rad
+        )
+        hi, lo = approach.clearances(0.0)
+        extra = {"p_approach": p_jaws, "p_approach_a": p_a, "p_approach_b": p_b}
+        extra |= {"approach_window_lo": float(lo[0]), "approach_window_hi": float(hi[0])}
+        p_axes = np.array([p_jaws, p_axes[1]])
     lower, upper = union_bounds(p_axes)
     cfg = risk_config.grasp
     return RiskReport(
@@ -382,7 +537,8 @@ def assess_grasp(
             "yaw_tolerance": tol.yaw,
             "p_closing": float(p_axes[0]),
             "p_lateral": float(p_axes[1]),
-            "p_yaw": float(p_axes[2]),
+            "p_yaw": float(p_axes[2]) if approach is None else 0.0,
+            **extra,
         },
     )
 
