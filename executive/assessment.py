@@ -12,7 +12,8 @@ Per alternative (DESIGN.md, "Data flow of one decision"):
   is one persistent bias, so its probability is exact over all knots;
 * grasp (the drop mode): the first grasp of the object from the table, against
   the scene's object pose uncertainty (a handover's second grasp takes the object
-  from a hand whose pose the robot knows; it is not scored here), and the
+  from a hand whose pose the robot knows; it is not scored here): the jaws must clear the
+  object's sides all the way down the planned approach (offset and yaw jointly), and the
   placement it leads to: the jaws centre the object across them, but its error
   along them stays in the hand and lands on the target, where the failure
   detector calls it misplaced beyond ``place_position_tol`` (see :func:`_grasp`);

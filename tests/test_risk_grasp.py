@@ -426,7 +426,7 @@ def test_an_error_along_the_jaws_is_carried_to_the_target_and_one_across_them_is
 def test_a_book_off_by_more_than_the_jaw_clearance_is_a_misaligned_grasp() -> None:
     """The truth book 4.5 cm off across the jaws (their clearance is 3 cm a side): a finger lands
     on it during the approach, which the detector reports as a drop (the grasp missed), the
-    failure mode the grasp risk's closing tolerance predicts, not as a collision."""
+    failure mode the grasp risk's approach window predicts, not as a collision."""
     from executive.composition import plan_alternative
     from executive.planning import Planner
     from executive.runner import execute_plan
