@@ -48,6 +48,7 @@ __all__ = [
     "base_document",
     "make_variant",
     "scene_problem",
+    "variant_trial_seed",
     "write_variant",
 ]
 
@@ -317,11 +318,19 @@ def _variant_document(
     for item, (x, y, z) in zip(doc["mission"], targets, strict=True):
         item["transfer"]["to"] = [_r(x), _r(y)] if z is None else [_r(x), _r(y), _r(z)]
     # The variant is one scene the executive estimates and decides on once (its physics check
-    # included); its trials vary the truth only.
+    # included); its trials vary the truth only, from truth seeds of its own (a variant that
+    # reused the base's would draw the same truth errors as every other variant).
     trials = doc.get("trials")
-    if isinstance(trials, dict):
-        trials.pop("scene_variation", None)
+    trials = trials if isinstance(trials, dict) else {}
+    trials.pop("scene_variation", None)
+    trials["seed"] = variant_trial_seed(seed, index)
+    doc["trials"] = trials
     return doc
+
+
+def variant_trial_seed(seed: int, index: int) -> int:
+    """The ``trials.seed`` of variant ``index`` of a suite seeded ``seed`` (its truths' and rollouts')."""
+    return int(np.random.SeedSequence([seed, index, 0x7121A15]).generate_state(1)[0] >> 1)
 
 
 # --- validity ---------------------------------------------------------------------------------

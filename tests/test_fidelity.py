@@ -282,3 +282,10 @@ def test_fidelity_end_to_end_in_physics(tmp_path: Path) -> None:
         assert {"regret", "ci95", "p_value", "naive_regret"} <= set(row["regret"])
     assert summary["trials_executed"] == executed == summary["pooled"]["any"]["trials"]
     assert (out / "table.md").is_file() and (out / "reliability.png").is_file() == (executed > 0)
+
+
+def test_each_variant_draws_its_truths_from_seeds_of_its_own(base: Scenario, variants: list[Variant]) -> None:
+    """Variants that shared the base's trial seeds would share every truth error: 30 draws, not 30 K."""
+    seeds = [v.scenario.trials.seed for v in variants]
+    assert len(set(seeds)) == len(seeds)
+    assert all(v.scenario.trials.scene_variation.is_zero() for v in variants)  # one estimate per variant

@@ -91,7 +91,8 @@ def test_plan_cli_shows_the_dry_runs(capsys: pytest.CaptureFixture[str]) -> None
     out = json.loads(capsys.readouterr().out)
     rows = out["tasks"][0]["alternatives"]
     assert all(r["physics"]["dry_run"]["outcome"] == "success" for r in rows)
-    assert all(r["physics"]["rollouts"] == 0 for r in rows)
+    default = load("book_transfer").risk.rollouts.count
+    assert all(r["physics"]["rollouts"] == default for r in rows)
 
 
 def test_bad_rollout_settings_are_located() -> None:
@@ -110,40 +111,39 @@ def test_bad_rollout_settings_are_located() -> None:
         )
 
 
-def test_where_the_analytic_models_and_physics_disagree_the_ranking_follows_physics() -> None:
-    """A heavy (2.2 kg), slippery (mu 0.59) book on a lower table: variant 14 of the fidelity suite.
+def test_where_the_analytic_models_and_physics_disagree_the_ranking_follows_physics(tmp_path: Path) -> None:
+    """The bundled scene with a 1.5 kg book.
 
-    The analytic models rank the right hand first; rolled out in physics it drops the book more
-    often than the left (the suite's campaign: right 17/30, left 9/30). The counts move the fused
-    drop probability up and the ranking follows them.
+    The analytic models rank the right hand last (its approach leaves the jaws the least room);
+    its rollouts in physics have the fewest failures. The counts move every fused estimate from
+    the analytic value towards the observed frequency, and the ranking follows them.
     """
     from executive.risk.rollouts import RolloutPool
-    from executive.variants import base_document, make_variant
 
-    base = load("book_transfer")
-    variant = make_variant(base, base_document(base), 0, 14)
-    scenario = with_rollouts(variant.scenario, 8)
-    task = dataclasses.replace(scenario.mission[0], alternatives=("left", "right"))
-    scenario = dataclasses.replace(scenario, mission=(task,))
+    doc = yaml.safe_load(scenario_path("book_transfer").read_text())
+    doc["robot"] = "humanoid"
+    doc["scene"]["objects"][0]["mass"] = 1.5
+    scenario = with_rollouts(loads(yaml.safe_dump(doc), source="heavy_book.yaml"), 8)
     world = build(scenario)
-    results = assess_task(world, task)
+    results = assess_task(world, scenario.mission[0])
     plans = {a.name: a.plan for a in results if a.plan is not None}
     analytic = {a.name: a.risk for a in results if a.risk is not None}
     ordering = scenario.risk.ordering
-    assert analytic["right"].value(ordering) < analytic["left"].value(ordering)  # the models' choice
+    assert max(analytic, key=lambda n: analytic[n].value(ordering)) == "right"  # the models' last
     pool = RolloutPool(2)
     try:
         verdict = check_alternatives(plans, analytic, estimate_scenario(world), pool)
     finally:
         pool.close()
-    left, right = verdict.alternatives["left"], verdict.alternatives["right"]
+    checked = verdict.alternatives
+    failures = {n: r.rollouts - r.counts["success"] for n, r in checked.items()}
     print(
-        {
-            n: (dict(r.counts), r.analytic.value(ordering), r.risk.value(ordering))
-            for n, r in verdict.alternatives.items()
-        }
+        {n: (dict(r.counts), r.analytic.value(ordering), r.risk.value(ordering)) for n, r in checked.items()}
     )
-    assert right.counts["drop"] > left.counts["drop"]
-    grasp = right.risk.components["grasp"]
-    assert grasp.probability > right.analytic.components["grasp"].probability
-    assert left.risk.value(ordering) < right.risk.value(ordering)  # physics' choice
+    assert failures["right"] < min(failures["left"], failures["left_to_right"])  # physics' first
+    for r in checked.values():  # each fused probability lies between the analytic one and k / n
+        for mode, report in r.risk.components.items():
+            p_a, k = r.analytic.components[mode].probability, report.details["failures"]
+            low, high = sorted((p_a, k / r.rollouts))
+            assert low - 1e-12 <= report.probability <= high + 1e-12
+    assert min(checked, key=lambda n: checked[n].risk.value(ordering)) == "right"
