@@ -221,7 +221,7 @@ def _run_variants(
         campaign_s += result.elapsed_s
         row = variant_statistics(variant, label, result.summary, result.records, names)
         done.append(row)
-        records.extend(result.records)
+        records.extend({**r, "variant": k} for r in result.records)
         remaining = (k_total - k - 1) * n * len(names)
         rate = new_trials / campaign_s if campaign_s > 0 and new_trials else float("nan")
         log(
@@ -359,6 +359,7 @@ def pooled_statistics(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, 
     from executive.stats import brier, expected_calibration_error, roc_auc
 
     executed = [r for r in records if r["outcome"] not in ("infeasible", "error")]
+    groups = [(r.get("variant"), r["alternative"]) for r in executed]
     out = {}
     for mode, key, p, y in _forecasts(executed):
         out[mode] = {
@@ -366,10 +367,21 @@ def pooled_statistics(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, 
             "trials": len(y),
             "events": int(y.sum()),
             "auc": _finite(roc_auc(p, y)),
+            "auc_ceiling": _finite(roc_auc(_group_rates(groups, y), y)),
             "brier": _finite(brier(p, y)),
             "ece": _finite(expected_calibration_error(p, y)),
         }
     return out
+
+
+def _group_rates(groups: Sequence[tuple[Any, str]], y: np.ndarray) -> np.ndarray:
+    """Each trial scored by its (variant, alternative)'s observed rate: the best ROC AUC any
+    prediction that is the same for every trial of an alternative in a variant can reach."""
+    sums: dict[tuple[Any, str], list[float]] = {}
+    for g, event in zip(groups, y, strict=True):
+        sums.setdefault(g, []).append(float(event))
+    rate = {g: float(np.mean(v)) for g, v in sums.items()}
+    return np.array([rate[g] for g in groups])
 
 
 def _forecasts(
@@ -575,10 +587,11 @@ def table_text(summary: dict[str, Any]) -> str:
         "  ".join(c.ljust(w) for c, w in zip(line, widths, strict=True)).rstrip() for line in [header, *rows]
     ]
     for label, pooled in _pooled_tables(summary):
-        lines += ["", f"{label:<9}events / trials   ROC AUC   Brier    ECE"]
+        lines += ["", f"{label:<9}events / trials   ROC AUC (ceiling)   Brier    ECE"]
         for mode, m in pooled.items():
             lines.append(
                 f"{mode:<9}{m['events']:>6} / {m['trials']:<9}{_num(m['auc'], '.3f'):>8}"
+                f" ({_num(m.get('auc_ceiling'), '.3f'):>5})"
                 f"{_num(m['brier'], '.4f'):>9}{_num(m['ece'], '.4f'):>8}   (by P({m['predicted_by']}))"
             )
     return "\n".join([*lines, "", *_footer(summary)])
@@ -600,12 +613,14 @@ def table_markdown(summary: dict[str, Any]) -> str:
     for label, pooled in _pooled_tables(summary):
         out += [
             "",
-            f"| failure mode ({label}) | predicted by | events | trials | ROC AUC | Brier | ECE |",
-            "|---|---|---:|---:|---:|---:|---:|",
+            f"| failure mode ({label}) | predicted by | events | trials | ROC AUC | AUC ceiling "
+            "| Brier | ECE |",
+            "|---|---|---:|---:|---:|---:|---:|---:|",
         ]
         for mode, m in pooled.items():
             out.append(
                 f"| {mode} | P({m['predicted_by']}) | {m['events']} | {m['trials']} "
-                f"| {_num(m['auc'], '.3f')} | {_num(m['brier'], '.4f')} | {_num(m['ece'], '.4f')} |"
+                f"| {_num(m['auc'], '.3f')} | {_num(m.get('auc_ceiling'), '.3f')} "
+                f"| {_num(m['brier'], '.4f')} | {_num(m['ece'], '.4f')} |"
             )
     return "\n".join([*out, "", *_footer(summary)])

@@ -289,3 +289,20 @@ def test_each_variant_draws_its_truths_from_seeds_of_its_own(base: Scenario, var
     seeds = [v.scenario.trials.seed for v in variants]
     assert len(set(seeds)) == len(seeds)
     assert all(v.scenario.trials.scene_variation.is_zero() for v in variants)  # one estimate per variant
+
+
+def test_the_pooled_auc_ceiling_scores_each_trial_by_its_groups_observed_rate() -> None:
+    """Two (variant, alternative) groups: 2 events in 4 trials, and none in 4. Scored by the groups'
+    rates (0.5, 0), the 2 events beat the 4 trials of the second group and tie the 2 quiet trials
+    of their own: AUC (2 x 4 + 0.5 x 2 x 2) / (2 x 6) = 10 / 12."""
+    from executive.fidelity import pooled_statistics
+
+    def record(variant: int, outcome: str) -> dict[str, object]:
+        predicted = {"collision": 0.1, "fall": 0.0, "grasp": 0.1, "combined": 0.2, "value": 0.3}
+        return {"variant": variant, "alternative": "left", "outcome": outcome, "predicted": predicted}
+
+    records = [record(0, o) for o in ("drop", "drop", "success", "success")]
+    records += [record(1, "success") for _ in range(4)]
+    pooled = pooled_statistics(records)
+    assert pooled["drop"]["auc_ceiling"] == pytest.approx(10 / 12)
+    assert pooled["drop"]["auc"] == pytest.approx(0.5)  # one prediction for all: no ranking at all
