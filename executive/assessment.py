@@ -1,6 +1,6 @@
 """Risk of whole alternatives: plan each on the estimate, assess every failure mode, combine.
 
-Per alternative (DESIGN.md, "Data flow of one decision"):
+Per alternative:
 
 * collision: every motion step is profiled with coal (with its own allowances:
   the hand may touch the object it grasps, the object its support while lifted

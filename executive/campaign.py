@@ -1,6 +1,6 @@
 """Monte Carlo validation campaigns: does the predicted risk predict real failures?
 
-A campaign runs N trials of every alternative of one task (DESIGN.md, "Validation").
+A campaign runs N trials of every alternative of one task.
 Trial ``i`` of every alternative uses the same truth: a perturbation drawn from the
 scenario's uncertainty with the generator seeded ``trials.seed + i`` (common random
 numbers: the alternatives are compared on the same worlds). A trial

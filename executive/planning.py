@@ -5,7 +5,7 @@ configuration by differential inverse kinematics (mink's tasks and limits; the Q
 of ``mink.solve_ik``, assembled on the unfrozen dofs and solved with DAQP by
 :class:`~executive.planning_limits.JointBounds`), then re-times the geometric path (see
 :mod:`executive.planning_timing`). Everything runs on the *estimate* world's
-model (DESIGN.md, "Data flow"); the returned qpos index that model.
+model; the returned qpos index that model.
 
 The QP of every IK step (mink's formulation, ``min ||J dq + e||_W^2`` subject to
 ``G dq <= h``, ``A dq = b``):

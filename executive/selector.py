@@ -227,6 +227,8 @@ class RiskSelector(py_trees.composites.Composite):
         self.phase = "planning"
 
         monitor = self.bb.get(LIVE_RISK_KEY) if self.guard and self.bb.exists(LIVE_RISK_KEY) else None
+        if self.physics is not None:
+            self.physics.pool.warm()  # the workers start (or are reused) while the planner works
 
         def work() -> Planned:
             assert self._planner is not None and self._collision is not None

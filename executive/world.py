@@ -1,6 +1,6 @@
 """Builds the MuJoCo world of a scenario: robot + floor + table + objects + obstacles.
 
-Two worlds per run (DESIGN.md, "Data flow"): the *estimate* is the scene as the
+Two worlds per run: the *estimate* is the scene as the
 robot believes it (nominal poses and parameters); the *truth* is what physics
 runs, sampled from the scenario's ``uncertainty`` block with an injected
 ``numpy.random.Generator``. The planner and the risk models only ever see the

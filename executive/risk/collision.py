@@ -1,6 +1,6 @@
 """Collision risk of a trajectory: coal signed distances, the seed metric, and P(collision).
 
-The seed metric (Long et al. 2018, "Collision Risk"; DESIGN.md, "Risk models"):
+The seed metric (Long et al. 2018, "Collision Risk"):
 
 - instantaneous risk ``r(t) = (1 - d(t)/d_safety)^b`` when ``d < d_safety``
   (1 when ``d <= 0``), else 0, with ``d`` the minimum robot-environment distance;

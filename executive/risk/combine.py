@@ -1,6 +1,6 @@
 """Combining the per-mode risk reports of one alternative into its total risk.
 
-Three totals, as DESIGN.md ("Combining") lays out:
+Three totals:
 
 * the seed's weighted sum of the per-mode seed scores (Long et al. 2018: fall
   weighted above collision);

@@ -21,7 +21,7 @@ Sources (one line each):
   half-plane iff one of its vertices does), so a pad corner (x, y) outside it is hit iff
   u = c - l tan t > y - x tan t - b / cos t; given t, u ~ N(0, s^2 (1 + tan^2 t)); t by
   Gauss-Hermite quadrature.
-- Shake validation (DESIGN.md, "Grasp"; the seed's sinusoidal excitation): oscillate the wrist
+- Shake validation (the seed's sinusoidal excitation): oscillate the wrist
   servos' targets q0 + A sin(2 pi f t) and watch the object in the hand frame.
 """
 
