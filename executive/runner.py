@@ -61,8 +61,13 @@ def execute_plan(
     control_dt: float = 0.02,
     time_limit_s: float | None = None,
 ) -> RunResult:
-    """Tick the plan's subtree against the truth world until it finishes; check the placement."""
-    robot = SimulatedRobot(truth, control_dt=control_dt, detector=FailureDetector(truth))
+    """Tick the plan's subtree against the truth world until it finishes; check the placement.
+
+    The detectors decide every failure as in a mission; the closest call (a report, never a
+    failure) is not computed: nothing reads it from a batch run.
+    """
+    detector = FailureDetector(truth, distance_stride=0)
+    robot = SimulatedRobot(truth, control_dt=control_dt, detector=detector)
     install(robot)
     root = build_subtree(plan)
     tree = py_trees.trees.BehaviourTree(root)
