@@ -26,7 +26,7 @@ def _heavy_box(tmp_path: Path) -> Path:
     doc["robot"] = "humanoid"
     book = doc["scene"]["objects"][0]
     book.update(size=[0.14, 0.10, 0.10], mass=4.0)
-    doc["risk"]["threshold"] = 100.0  # the gate is not what this test is about
+    doc["risk"]["threshold"] = 0.001  # every alternative needs approval: the prompt shows the checks
     path = tmp_path / "heavy_box.yaml"
     path.write_text(yaml.safe_dump(doc))
     return path
@@ -54,6 +54,18 @@ def test_an_alternative_whose_dry_run_fails_is_never_executed(tmp_path: Path) ->
     executed = [e["alternative"] for e in lines if e["kind"] == "execute"]
     assert executed and "left_to_right" not in executed
     assert executive.outcome == "success"
+    # the operator sees the dry run's verdict and the rollouts
+    request = next(e for e in lines if e["kind"] == "approval_request")["request"]
+    rows = {r["name"]: r for r in request["alternatives"]}
+    assert not rows["left_to_right"]["feasible"] and rows["left_to_right"]["reason"] == handover["reason"]
+    assert rows["left"]["physics"].startswith("dry run: ok; 4 rollouts: ")
+    from executive.approval import AlternativeRisk as Row
+    from executive.approval import ApprovalRequest, request_table
+
+    table = request_table(
+        ApprovalRequest(**{**request, "alternatives": tuple(Row(**r) for r in request["alternatives"])})
+    )
+    assert "dry run: ok; 4 rollouts" in table and "fails in simulation with the scene as estimated" in table
 
 
 def _one_alternative(count: int) -> tuple[Scenario, dict[str, Any], dict[str, Any]]:
