@@ -208,8 +208,8 @@ class ClosestCall:
             a, b = self.ignored_bodies
             parts.append(f"largest graze {a}-{b} {self.ignored_force:.2f} N at t={self.ignored_time:.2f} s")
         if self.self_contacts:
-            a, b = self.self_bodies
-            parts.append(f"{self.self_contacts} self-contacts (largest {a}-{b} {self.self_force:.1f} N)")
+            largest = f"{'-'.join(self.self_bodies)} " if self.self_bodies else ""
+            parts.append(f"{self.self_contacts} self-contacts (largest {largest}{self.self_force:.1f} N)")
         return "; ".join(parts)
 
 
@@ -577,7 +577,7 @@ class FailureDetector:
         for key, f in totals.items():
             code = pair_code[key]
             if code == _SELF:
-                if f > c.self_force:
+                if f > c.self_force or not c.self_bodies:  # a zero-force touch names its bodies too
                     c = replace(c, self_force=f, self_bodies=self._pair_labels(key))
             elif f >= th:
                 if worst is None or (_SEVERITY[code], f) > worst[:2]:
