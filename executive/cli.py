@@ -15,11 +15,13 @@ from typing import TYPE_CHECKING
 
 from executive import registry
 from executive.errors import ExecutiveError
+from executive.output_paths import check_file, check_folder
 from executive.scenario_types import Scenario
 from executive.world import World, build
 
 if TYPE_CHECKING:
     from executive.assessment import AlternativeRisk
+    from executive.render import VideoRecorder
 
 __all__ = ["main"]
 
@@ -90,9 +92,10 @@ def summary(scenario: Scenario, world: World) -> str:
 def _cmd_show(args: argparse.Namespace) -> int:
     from executive.render import render_png
 
+    png = check_file(args.png, "--png")
     scenario = _load(args.scenario)
     world = build(scenario)
-    out = render_png(world, Path(args.png), width=args.width, height=args.height)
+    out = render_png(world, png, width=args.width, height=args.height)
     print(summary(scenario, world))
     print(f"picture   {out} ({args.width}x{args.height})")
     return EXIT_OK
@@ -101,10 +104,31 @@ def _cmd_show(args: argparse.Namespace) -> int:
 def _cmd_run(args: argparse.Namespace) -> int:
     from executive.risk.rollouts import with_rollouts
 
+    _check_run_paths(args)
     scenario = with_rollouts(_load(args.scenario), args.rollouts)
     if args.alternative is None:
         return _run_mission(scenario, args)
     return _run_one(scenario, args)
+
+
+def _check_out(args: argparse.Namespace) -> None:
+    """``--out DIR`` (or, without it, the default ``runs/``) must be a folder this process can write."""
+    if args.out:
+        check_folder(args.out, "--out")
+    else:
+        check_folder("runs", "the default run folder (no --out)")
+
+
+def _check_run_paths(args: argparse.Namespace) -> None:
+    """``run``'s output paths, before anything is planned: ``--out`` a writable folder, ``--video``
+    a writable ``.gif`` file (else an ExecutiveError, exit 2)."""
+    _check_out(args)
+    if args.video:
+        if Path(args.video).suffix.lower() != ".gif":
+            raise ExecutiveError(
+                f"--video {args.video}: only animated GIF (.gif) is written (Pillow, no ffmpeg needed)"
+            )
+        check_file(args.video, "--video")
 
 
 def _run_mission(scenario: Scenario, args: argparse.Namespace) -> int:
@@ -151,8 +175,17 @@ def _run_mission(scenario: Scenario, args: argparse.Namespace) -> int:
             viewer.close()
     display.finish()
     if recorder is not None:
-        print(f"video     {recorder.save()}")
+        _save_video(recorder)
     return EXIT_OK if executive.outcome == "success" else EXIT_FAILED
+
+
+def _save_video(recorder: VideoRecorder) -> None:
+    """Write the video; a failure now (the path was checked before the run) is reported, and the
+    mission's outcome (its exit code) stands."""
+    try:
+        print(f"video     {recorder.save()}")
+    except (ExecutiveError, OSError) as exc:
+        print(f"executive run: the video was not saved: {exc}", file=sys.stderr)
 
 
 def _run_one(scenario: Scenario, args: argparse.Namespace) -> int:
@@ -186,6 +219,8 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     from executive.report import risk_json, risk_table
     from executive.risk.rollouts import PhysicsCheck, with_rollouts
 
+    if args.plot:
+        check_folder(args.plot, "--plot")
     scenario = with_rollouts(_load(args.scenario), args.rollouts)
     world = build(scenario)
     tasks = []
@@ -242,6 +277,7 @@ def _print_plan(
 def _cmd_campaign(args: argparse.Namespace) -> int:
     from executive.campaign import run_campaign, table_text
 
+    _check_out(args)
     scenario = _load(args.scenario)
     alternatives = [a.strip() for a in args.alternatives.split(",")] if args.alternatives else None
     result = run_campaign(
@@ -277,6 +313,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
 def _cmd_fidelity(args: argparse.Namespace) -> int:
     from executive.fidelity import run_fidelity, table_text
 
+    _check_out(args)
     scenario = _load(args.scenario)
     result = run_fidelity(
         scenario,
@@ -302,14 +339,31 @@ def _cmd_fidelity(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
-def _positive(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
-    return value
+def _whole_number(low: int, high: int, what: str, high_text: str = "") -> Callable[[str], int]:
+    """An argparse ``type=``: a whole number in ``[low, high]``, else a message giving the range
+    (``high_text`` spells ``high`` where digits would not read well)."""
+    valid = f"from {low} to {high_text or high} ({what})"
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text.strip())
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number {valid}, got {text!r}") from None
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be {valid}, got {value}")
+        return value
+
+    parse.__name__ = what
+    return parse
+
+
+_SEED = _whole_number(0, 2**63 - 1, "a seed", "2**63-1")
+_PIXELS = _whole_number(1, 16384, "pixels")
+_ROLLOUTS = _whole_number(0, 10_000, "rollouts per alternative; 0: off")
+_TRIALS = _whole_number(1, 1_000_000, "trials")
+_JOBS = _whole_number(1, 1024, "worker processes")
+_VARIANTS = _whole_number(1, 10_000, "scene variants")
+_TASK = _whole_number(0, 10_000, "a task index, 0 for the first")
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -334,15 +388,15 @@ def _parser() -> argparse.ArgumentParser:
     p = sub.add_parser("show", help="render the scenario's scene to a PNG (offscreen)")
     p.add_argument("scenario", help=scenario_help)
     p.add_argument("--png", required=True, help="output PNG file")
-    p.add_argument("--width", type=int, default=960)
-    p.add_argument("--height", type=int, default=720)
+    p.add_argument("--width", type=_PIXELS, default=960, help="picture width in pixels (default 960)")
+    p.add_argument("--height", type=_PIXELS, default=720, help="picture height in pixels (default 720)")
     p.set_defaults(func=_cmd_show)
 
     p = sub.add_parser("plan", help="plan every alternative and print its predicted risk (no execution)")
     p.add_argument("scenario", help=scenario_help)
     p.add_argument("--json", action="store_true", help="print the table as JSON for machines")
     p.add_argument("--plot", metavar="DIR", help="write CoM/support-polygon and distance plots to DIR")
-    p.add_argument("--rollouts", type=int, metavar="N", help=rollouts_help)
+    p.add_argument("--rollouts", type=_ROLLOUTS, metavar="N", help=rollouts_help)
     p.set_defaults(func=_cmd_plan)
 
     p = sub.add_parser(
@@ -350,14 +404,16 @@ def _parser() -> argparse.ArgumentParser:
         help="run the mission: plan every alternative, gate on risk, execute the lowest-risk one in physics",
     )
     p.add_argument("scenario", help=scenario_help)
-    p.add_argument("--rollouts", type=int, metavar="N", help=rollouts_help)
+    p.add_argument("--rollouts", type=_ROLLOUTS, metavar="N", help=rollouts_help)
     p.add_argument(
         "--alternative",
         help="execute this alternative of task 0 only (left, right, left_to_right, ...): "
         "no selection, no approval",
     )
     p.add_argument("--exact", action="store_true", help="the truth equals the estimate (no sampled error)")
-    p.add_argument("--seed", type=int, default=None, help="seed of the sampled truth (default: trials.seed)")
+    p.add_argument(
+        "--seed", type=_SEED, default=None, help="seed of the sampled truth (default: trials.seed)"
+    )
     p.add_argument(
         "--approve",
         choices=("prompt", "auto", "deny"),
@@ -377,9 +433,9 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("scenario", help=scenario_help)
     p.add_argument(
-        "--trials", type=_positive, default=None, help="trials per alternative (default: trials.count)"
+        "--trials", type=_TRIALS, default=None, help="trials per alternative (default: trials.count)"
     )
-    p.add_argument("--jobs", type=_positive, default=1, help="parallel worker processes (default 1)")
+    p.add_argument("--jobs", type=_JOBS, default=1, help="parallel worker processes (default 1)")
     p.add_argument("--out", metavar="DIR", help="run folder (default runs/<timestamp>-<scenario>-campaign)")
     p.add_argument("--resume", action="store_true", help="complete the campaign in --out DIR")
     p.add_argument(
@@ -388,8 +444,8 @@ def _parser() -> argparse.ArgumentParser:
         default="local",
         help="local processes (default) or Ray tasks (pip install .[cluster])",
     )
-    p.add_argument("--seed", type=int, default=None, help="seed of trial 0 (default: trials.seed)")
-    p.add_argument("--task", type=int, default=0, help="index of the mission's task (default 0)")
+    p.add_argument("--seed", type=_SEED, default=None, help="seed of trial 0 (default: trials.seed)")
+    p.add_argument("--task", type=_TASK, default=0, help="index of the mission's task (default 0)")
     p.add_argument("--alternatives", help="comma-separated subset of the task's alternatives (default: all)")
     p.set_defaults(func=_cmd_campaign)
 
@@ -399,12 +455,16 @@ def _parser() -> argparse.ArgumentParser:
         "ranking hold (predicted vs observed, regret of the per-trial choice)?",
     )
     p.add_argument("scenario", help=scenario_help)
-    p.add_argument("--variants", type=int, default=10, help="number of scene variants K (default 10)")
-    p.add_argument("--trials", type=int, default=10, help="trials per alternative and variant (default 10)")
-    p.add_argument("--jobs", type=int, default=1, help="parallel worker processes per campaign (default 1)")
+    p.add_argument("--variants", type=_VARIANTS, default=10, help="number of scene variants K (default 10)")
+    p.add_argument(
+        "--trials", type=_TRIALS, default=10, help="trials per alternative and variant (default 10)"
+    )
+    p.add_argument("--jobs", type=_JOBS, default=1, help="parallel worker processes per campaign (default 1)")
     p.add_argument("--out", metavar="DIR", help="suite folder (default runs/<timestamp>-<scenario>-fidelity)")
-    p.add_argument("--seed", type=int, default=None, help="seed of the variants (default: trials.seed)")
-    p.add_argument("--rollouts", type=int, default=0, help="risk.rollouts.count of every variant (0: off)")
+    p.add_argument("--seed", type=_SEED, default=None, help="seed of the variants (default: trials.seed)")
+    p.add_argument(
+        "--rollouts", type=_ROLLOUTS, default=0, help="risk.rollouts.count of every variant (0: off)"
+    )
     p.add_argument("--resume", action="store_true", help="complete the suite in --out DIR")
     p.set_defaults(func=_cmd_fidelity)
     return parser
@@ -417,6 +477,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return func(args)
     except ExecutiveError as exc:
+        print(f"executive {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except OSError as exc:  # a path the checks could not foresee (a disk filled, a folder removed)
         print(f"executive {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except KeyboardInterrupt:

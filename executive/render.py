@@ -57,8 +57,11 @@ def render_png(world: World, path: Path, width: int = 960, height: int = 720) ->
     import matplotlib.image
 
     rgb = render_rgb(world, width, height)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    matplotlib.image.imsave(path, rgb)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        matplotlib.image.imsave(path, rgb, format="png")
+    except OSError as exc:
+        raise ExecutiveError(f"{path}: the picture could not be written ({exc.strerror or exc})") from None
     return path
 
 
@@ -96,14 +99,18 @@ class VideoRecorder:
         self.frames.append(np.asarray(self.renderer.render(), dtype=np.uint8).copy())
 
     def save(self) -> Path:
+        """Write the frames as an animated GIF at ``path``; an ExecutiveError if that fails."""
         from PIL import Image
 
         self.renderer.close()
         if not self.frames:
             raise ExecutiveError(f"--video {self.path}: no frames were captured")
-        self.path.parent.mkdir(parents=True, exist_ok=True)
         images = [Image.fromarray(f) for f in self.frames]
-        images[0].save(
-            self.path, save_all=True, append_images=images[1:], duration=int(1000 / self.fps), loop=0
-        )
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            images[0].save(
+                self.path, save_all=True, append_images=images[1:], duration=int(1000 / self.fps), loop=0
+            )
+        except OSError as exc:
+            raise ExecutiveError(f"--video {self.path}: not written ({exc.strerror or exc})") from None
         return self.path
