@@ -18,7 +18,10 @@ from pathlib import Path
 from typing import TypeVar
 
 from executive import registry
+from executive import scenario_ranges as R
+from executive.robot_model import BODY_PART_LABELS, RobotFacts, robot_facts
 from executive.robots.profile import load_profile
+from executive.robots.profile_types import RobotProfile
 from executive.scenario_scene import read_scene, read_transfer
 from executive.scenario_types import (
     ApprovalConfig,
@@ -37,7 +40,16 @@ from executive.scenario_types import (
     TrialsConfig,
     Uncertainty,
 )
-from executive.validation import Node, load_yaml_file, load_yaml_text, read_fields, unknown_name
+from executive.scene_checks import check_scene
+from executive.validation import (
+    Node,
+    check_model_file,
+    load_yaml_file,
+    load_yaml_text,
+    read_fields,
+    suggest,
+    unknown_name,
+)
 
 __all__ = ["APPROVAL_MODES", "ORDERINGS", "TASK_KINDS", "from_dict", "load", "loads"]
 
@@ -83,9 +95,9 @@ def _scenario(root: Node, base_dir: Path) -> Scenario:
     # Read in schema order, so the first error reported is the first in the document.
     name = root.get("name").string()
     description = root.opt("description")
-    robot = _robot(root.get("robot"), base_dir)
+    robot, profile = _robot(root.get("robot"), base_dir)
     scene = read_scene(root.get("scene"))
-    return Scenario(
+    scenario = Scenario(
         name=name,
         description=description.string(allow_empty=True).strip() if description is not None else "",
         robot=robot,
@@ -96,6 +108,10 @@ def _scenario(root: Node, base_dir: Path) -> Scenario:
         mission=_mission(root.get("mission"), scene),
         trials=_optional(root, "trials", _trials, TrialsConfig),
     )
+    facts = robot_facts(robot.mjcf, profile)
+    _check_body_parts(root, scenario, facts)
+    check_scene(root, scenario, facts)
+    return scenario
 
 
 def _optional(root: Node, key: str, reader: Callable[[Node], T], default: Callable[[], T]) -> T:
@@ -111,7 +127,7 @@ def _bundled_robots() -> str:
     return ", ".join(registry.list_robots()) or "(none)"
 
 
-def _robot(node: Node, base_dir: Path) -> RobotSpec:
+def _robot(node: Node, base_dir: Path) -> tuple[RobotSpec, RobotProfile]:
     """``robot: humanoid`` or ``robot: {mjcf: PATH, profile: NAME-OR-PATH}`` or ``{name: NAME}``."""
     if isinstance(node.value, str):
         profile_path = _bundled_profile_path(node)
@@ -132,6 +148,7 @@ def _robot(node: Node, base_dir: Path) -> RobotSpec:
     profile = load_profile(profile_path)
     if mjcf_node is not None:
         mjcf = mjcf_node.file_path(base_dir, "MJCF file")
+        check_model_file(mjcf_node, mjcf)
     elif profile.mjcf is not None:
         mjcf = profile.mjcf
     else:
@@ -139,7 +156,7 @@ def _robot(node: Node, base_dir: Path) -> RobotSpec:
             f"the profile of robot '{profile.name}' ships no MJCF model; "
             f"name one: robot: {{mjcf: PATH, profile: {profile.name}}}"
         )
-    return RobotSpec(name=profile.name, mjcf=mjcf, profile=profile_path)
+    return RobotSpec(name=profile.name, mjcf=mjcf, profile=profile_path), profile
 
 
 def _bundled_profile_path(node: Node) -> Path:
@@ -156,8 +173,12 @@ def _profile_path(node: Node, base_dir: Path) -> Path:
         bundled = registry.robot_profile_path(text)
         if bundled is not None:
             return bundled
-    candidate = (base_dir / Path(text).expanduser()).resolve()
-    if not candidate.is_file():
+    try:
+        candidate = (base_dir / Path(text).expanduser()).resolve()
+        exists = candidate.is_file()
+    except (OSError, ValueError, RuntimeError) as exc:
+        node.fail(f"invalid profile path {text!r}: {exc}")
+    if not exists:
         node.fail(
             f"no profile file {text!r} (resolved to {candidate}) and no bundled robot of that name; "
             f"bundled robots: {_bundled_robots()}"
@@ -187,37 +208,44 @@ def _mission(node: Node, scene: SceneConfig) -> tuple[TransferTask, ...]:
 # ----------------------------------------------------------------------------- small blocks
 
 
-def _deg(node: Node) -> float:
-    return math.radians(node.number())
+def between(low: float, high: float, *, open_low: bool = False) -> Callable[[Node], float]:
+    """A reader of a finite number in [low, high] (or (low, high] with ``open_low``)."""
+    if open_low:
+        return lambda n: n.number(gt=low, le=high)
+    return lambda n: n.number(ge=low, le=high)
 
 
-def _deg_positive(node: Node) -> float:
-    return math.radians(node.positive())
+def whole(low: int, high: int) -> Callable[[Node], int]:
+    """A reader of an integer in [low, high]."""
+    return lambda n: n.integer(ge=low, le=high)
 
 
-def _deg_non_negative(node: Node) -> float:
-    return math.radians(node.non_negative())
+def _deg_sigma(node: Node) -> float:
+    return math.radians(node.number(ge=0.0, le=R.YAW_SIGMA_MAX_DEG))
+
+
+def _deg_scale(node: Node) -> float:
+    return math.radians(node.number(gt=0.0, le=R.GRASP_ANGLE_MAX_DEG))
 
 
 # 1-sigma spreads of the scene's poses (m, m, deg in YAML -> rad): an estimate's error
 # (uncertainty) and the trial-to-trial shift of a campaign's scene (trials.scene_variation).
 _POSE_SPREADS: dict[str, tuple[str, Callable[[Node], object]]] = {
-    "object_position": ("object_position", Node.non_negative),
-    "object_yaw": ("object_yaw_rad", _deg_non_negative),
-    "obstacle_position": ("obstacle_position", Node.non_negative),
+    "object_position": ("object_position", between(0.0, R.POSITION_SIGMA_MAX)),
+    "object_yaw": ("object_yaw_rad", _deg_sigma),
+    "obstacle_position": ("obstacle_position", between(0.0, R.POSITION_SIGMA_MAX)),
 }
 
 
 def _uncertainty(node: Node) -> Uncertainty:
-    nonneg = Node.non_negative
     return read_fields(
         node,
         Uncertainty,
         {
             **_POSE_SPREADS,
-            "com": ("com", nonneg),
-            "object_mass": ("object_mass", nonneg),
-            "friction": ("friction", nonneg),
+            "com": ("com", between(0.0, R.COM_SIGMA_MAX)),
+            "object_mass": ("object_mass", between(0.0, R.RELATIVE_SIGMA_MAX)),
+            "friction": ("friction", between(0.0, R.RELATIVE_SIGMA_MAX)),
         },
     )
 
@@ -226,7 +254,10 @@ def _approval(node: Node) -> ApprovalConfig:
     return read_fields(
         node,
         ApprovalConfig,
-        {"mode": ("mode", lambda n: n.choice(APPROVAL_MODES)), "timeout_s": ("timeout_s", Node.positive)},
+        {
+            "mode": ("mode", lambda n: n.choice(APPROVAL_MODES)),
+            "timeout_s": ("timeout_s", between(0.0, R.TIMEOUT_MAX_S, open_low=True)),
+        },
     )
 
 
@@ -235,8 +266,8 @@ def _trials(node: Node) -> TrialsConfig:
         node,
         TrialsConfig,
         {
-            "count": ("count", lambda n: n.integer(ge=1)),
-            "seed": ("seed", lambda n: n.integer(ge=0)),
+            "count": ("count", whole(1, R.TRIALS_MAX)),
+            "seed": ("seed", whole(0, R.SEED_MAX)),
             "scene_variation": ("scene_variation", _scene_variation),
         },
     )
@@ -249,7 +280,7 @@ def _scene_variation(node: Node) -> SceneVariation:
 
 
 def _scale_range(node: Node) -> tuple[float, float]:
-    low, high = node.numbers(2, gt=0.0)
+    low, high = node.numbers(2, gt=0.0, le=R.PERCEPTION_SCALE_MAX)
     if low > high:
         node.fail(f"the range [{low:g}, {high:g}] is reversed: give [low, high] with low <= high")
     return low, high
@@ -259,22 +290,75 @@ def _scale_range(node: Node) -> tuple[float, float]:
 
 
 def _risk(node: Node) -> RiskConfig:
-    return read_fields(
+    config = read_fields(
         node,
         RiskConfig,
         {
-            "d_safety": ("d_safety", Node.positive),
+            "d_safety": ("d_safety", between(0.0, R.D_SAFETY_MAX, open_low=True)),
             "collision": ("collision", _collision),
             "fall": ("fall", _fall),
             "grasp": ("grasp", _grasp),
             "weights": ("weights", _weights),
             "severity": ("severity", _severity),
             "ordering": ("ordering", lambda n: n.choice(ORDERINGS)),
-            "threshold": ("threshold", Node.non_negative),
+            "threshold": ("threshold", Node.non_negative),  # its maximum: check_threshold
             "guard": ("guard", _guard),
             "rollouts": ("rollouts", _rollouts),
         },
     )
+    _check_threshold(node, config)
+    return config
+
+
+def _com_margin(node: Node) -> float:
+    """``guard.min_com_margin`` (m): a negative margin would let the CoM leave the feet first."""
+    value = node.number()
+    if value < 0.0:
+        node.fail(
+            f"expected a number >= 0 and <= {R.COM_MARGIN_MAX:g} (m), got {value:g}: a negative margin lets "
+            "the centre of mass leave the support polygon before the guard trips, which switches the "
+            "fall guard off"
+        )
+    return node.number(ge=0.0, le=R.COM_MARGIN_MAX)
+
+
+def max_ordering_value(risk: RiskConfig) -> tuple[float, str]:
+    """The largest value ``risk.ordering`` can take, and how it is made up (for messages).
+
+    probability: 1. weighted_sum: the collision weight times the collision metric's largest
+    score (peak_weight + exposure_weight) plus the fall and grasp weights (their scores are at
+    most 1). expected_loss: the collision severity times the largest body-part factor (1 for a
+    part not listed) plus the fall and drop severities.
+    """
+    if risk.ordering == "probability":
+        return 1.0, "a probability is at most 1"
+    if risk.ordering == "weighted_sum":
+        w = dict(risk.weights)
+        peak = risk.collision.peak_weight + risk.collision.exposure_weight
+        total = w.get("collision", 0.0) * peak + w.get("fall", 0.0) + w.get("grasp", 0.0)
+        return total, (
+            f"weights collision {w.get('collision', 0.0):g} x (peak_weight + exposure_weight) {peak:g} "
+            f"+ fall {w.get('fall', 0.0):g} + grasp {w.get('grasp', 0.0):g}"
+        )
+    sev = risk.severity
+    factor = max([1.0, *(f for _, f in sev.body_parts)])
+    total = sev.collision * factor + sev.fall + sev.drop
+    return total, (
+        f"severity collision {sev.collision:g} x largest body-part factor {factor:g} "
+        f"+ fall {sev.fall:g} + drop {sev.drop:g}"
+    )
+
+
+def _check_threshold(node: Node, risk: RiskConfig) -> None:
+    """A threshold at or above the ordering's largest value would never ask for approval."""
+    highest, how = max_ordering_value(risk)
+    if risk.threshold >= highest:
+        where = node.child("threshold", risk.threshold) if node.has("threshold") else node
+        where.fail(
+            f"threshold {risk.threshold:g} can never be exceeded: the largest {risk.ordering} "
+            f"any alternative can have is {highest:g} ({how}), so the approval gate would never ask; "
+            f"give a threshold below {highest:g}"
+        )
 
 
 def _rollouts(node: Node) -> RolloutConfig:
@@ -282,14 +366,14 @@ def _rollouts(node: Node) -> RolloutConfig:
         node,
         RolloutConfig,
         {
-            "count": ("count", lambda n: n.integer(ge=0)),
-            "min_count": ("min_count", lambda n: n.integer(ge=1)),
-            "batch": ("batch", lambda n: n.integer(ge=1)),
-            "budget_s": ("budget_s", Node.positive),
-            "confidence": ("confidence", lambda n: n.number(gt=0.5, le=0.999)),
-            "indifference": ("indifference", Node.non_negative),
-            "prior_weight": ("prior_weight", Node.non_negative),
-            "jobs": ("jobs", lambda n: n.integer(ge=1)),
+            "count": ("count", whole(0, R.ROLLOUTS_MAX)),
+            "min_count": ("min_count", whole(1, R.ROLLOUTS_MAX)),
+            "batch": ("batch", whole(1, R.ROLLOUTS_MAX)),
+            "budget_s": ("budget_s", between(0.0, R.BUDGET_MAX_S, open_low=True)),
+            "confidence": ("confidence", between(0.5, 0.999, open_low=True)),
+            "indifference": ("indifference", between(0.0, R.INDIFFERENCE_MAX)),
+            "prior_weight": ("prior_weight", between(0.0, R.PRIOR_WEIGHT_MAX)),
+            "jobs": ("jobs", whole(1, R.JOBS_MAX)),
         },
     )
     if config.count and config.min_count > config.count:
@@ -304,9 +388,9 @@ def _guard(node: Node) -> GuardConfig:
         node,
         GuardConfig,
         {
-            "min_distance": ("min_distance", Node.non_negative),
-            "lookahead_s": ("lookahead_s", Node.non_negative),
-            "min_com_margin": ("min_com_margin", Node.number),
+            "min_distance": ("min_distance", between(0.0, R.GUARD_DISTANCE_MAX)),
+            "lookahead_s": ("lookahead_s", between(0.0, R.LOOKAHEAD_MAX_S)),
+            "min_com_margin": ("min_com_margin", _com_margin),
         },
     )
 
@@ -316,9 +400,9 @@ def _collision(node: Node) -> CollisionRiskConfig:
         node,
         CollisionRiskConfig,
         {
-            "exponent": ("exponent", Node.positive),
-            "peak_weight": ("peak_weight", Node.non_negative),
-            "exposure_weight": ("exposure_weight", Node.non_negative),
+            "exponent": ("exponent", between(0.0, R.EXPONENT_MAX, open_low=True)),
+            "peak_weight": ("peak_weight", between(0.0, R.WEIGHT_MAX)),
+            "exposure_weight": ("exposure_weight", between(0.0, R.WEIGHT_MAX)),
         },
     )
 
@@ -328,9 +412,9 @@ def _fall(node: Node) -> FallRiskConfig:
         node,
         FallRiskConfig,
         {
-            "circle_radius": ("circle_radius", Node.positive),
-            "sigmas": ("sigmas", Node.positive),
-            "exponent": ("exponent", Node.positive),
+            "circle_radius": ("circle_radius", between(0.0, R.FALL_RADIUS_MAX, open_low=True)),
+            "sigmas": ("sigmas", between(0.0, R.SIGMAS_MAX, open_low=True)),
+            "exponent": ("exponent", between(0.0, R.EXPONENT_MAX, open_low=True)),
         },
     )
 
@@ -340,13 +424,13 @@ def _grasp(node: Node) -> GraspRiskConfig:
         node,
         GraspRiskConfig,
         {
-            "position_scale": ("position_scale", Node.positive),
-            "position_max": ("position_max", Node.positive),
-            "angle_scale": ("angle_scale_rad", _deg_positive),
-            "angle_max": ("angle_max_rad", _deg_positive),
-            "steepness": ("steepness", Node.positive),
-            "position_weight": ("position_weight", Node.non_negative),
-            "angle_weight": ("angle_weight", Node.non_negative),
+            "position_scale": ("position_scale", between(0.0, R.GRASP_POSITION_MAX, open_low=True)),
+            "position_max": ("position_max", between(0.0, R.GRASP_POSITION_MAX, open_low=True)),
+            "angle_scale": ("angle_scale_rad", _deg_scale),
+            "angle_max": ("angle_max_rad", _deg_scale),
+            "steepness": ("steepness", between(0.0, R.STEEPNESS_MAX, open_low=True)),
+            "position_weight": ("position_weight", between(0.0, R.WEIGHT_MAX)),
+            "angle_weight": ("angle_weight", between(0.0, R.WEIGHT_MAX)),
         },
     )
     if not config.position_scale < config.position_max:
@@ -354,6 +438,11 @@ def _grasp(node: Node) -> GraspRiskConfig:
         where.fail(
             "expected position_scale < position_max, "
             f"got {config.position_scale:g} >= {config.position_max:g}"
+        )
+    if config.position_weight + config.angle_weight <= 0.0:
+        node.child("position_weight", None).fail(
+            "position_weight and angle_weight are both 0: the grasp score would divide by zero; "
+            "give at least one a positive weight"
         )
     if not config.angle_scale_rad < config.angle_max_rad:
         where = node.child("angle_scale" if node.has("angle_scale") else "angle_max", None)
@@ -368,7 +457,7 @@ def _weights(node: Node) -> tuple[tuple[str, float], ...]:
     node.check_keys(optional=RISK_TERMS)
     weights = dict(RiskConfig().weights)
     for key, child in node.items():
-        weights[key] = child.non_negative()
+        weights[key] = child.number(ge=0.0, le=R.WEIGHT_MAX)
     return tuple(weights.items())
 
 
@@ -377,9 +466,9 @@ def _severity(node: Node) -> Severity:
         node,
         Severity,
         {
-            "collision": ("collision", Node.positive),
-            "fall": ("fall", Node.positive),
-            "drop": ("drop", Node.positive),
+            "collision": ("collision", between(0.0, R.SEVERITY_MAX, open_low=True)),
+            "fall": ("fall", between(0.0, R.SEVERITY_MAX, open_low=True)),
+            "drop": ("drop", between(0.0, R.SEVERITY_MAX, open_low=True)),
             "body_parts": ("body_parts", _body_parts),
         },
     )
@@ -392,5 +481,18 @@ def _body_parts(node: Node) -> tuple[tuple[str, float], ...]:
     for key, child in node.items():
         if not key.strip():
             child.fail("expected a body part name, got an empty key")
-        parts.append((key, child.positive()))
+        parts.append((key, child.number(gt=0.0, le=R.SEVERITY_MAX)))
     return tuple(parts)
+
+
+def _check_body_parts(root: Node, scenario: Scenario, facts: RobotFacts | None) -> None:
+    """Each ``severity.body_parts`` name is a body-part label or a body of the robot's model."""
+    if facts is None:
+        return  # the model did not load: the world builder reports that
+    valid = [*BODY_PART_LABELS, *facts.bodies]
+    for name, _ in scenario.risk.severity.body_parts:
+        if name not in valid:
+            Node(None, root.source, f"risk.severity.body_parts.{name}", root.error).fail(
+                f"unknown body part '{name}'{suggest(name, valid) or ';'} valid names: the body-part labels "
+                f"{', '.join(BODY_PART_LABELS)}, or a body of the robot's model: {', '.join(facts.bodies)}"
+            )

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 
+from executive import scenario_ranges as R
 from executive.scenario_types import ALTERNATIVES, SHAPES, Body, SceneConfig, Shape, Table, TransferTask
 from executive.validation import Node
 
@@ -40,15 +41,29 @@ def read_scene(node: Node) -> SceneConfig:
 
 def _table(node: Node) -> Table:
     node.check_keys(("position", "size", "height"), ("yaw",))
-    x, y = node.get("position").numbers(2)
-    sx, sy, thickness = node.get("size").numbers(3, gt=0.0)
+    x, y = node.get("position").numbers(2, ge=-R.POSITION_MAX, le=R.POSITION_MAX)
+    sx, sy = node.get("size").numbers(3, gt=0.0, le=R.TABLE_SIZE_MAX)[:2]
+    thickness = node.get("size").items_list()[2].number(gt=0.0, le=R.TABLE_THICKNESS_MAX)
     yaw = node.opt("yaw")
     return Table(
         position=(x, y),
         size=(sx, sy, thickness),
-        height=node.get("height").positive(),
-        yaw_rad=math.radians(yaw.number()) if yaw is not None else 0.0,
+        height=node.get("height").number(gt=0.0, le=R.TABLE_HEIGHT_MAX),
+        yaw_rad=_angle(yaw) if yaw is not None else 0.0,
     )
+
+
+def _angle(node: Node) -> float:
+    """An angle in degrees within +-360, in radians."""
+    return math.radians(node.number(ge=-R.ANGLE_MAX_DEG, le=R.ANGLE_MAX_DEG))
+
+
+def _position(node: Node) -> tuple[float, ...]:
+    """[x, y] or [x, y, z] (m): |x|, |y| within POSITION_MAX, z within [0, HEIGHT_MAX]."""
+    values = node.numbers((2, 3), ge=-R.POSITION_MAX, le=R.POSITION_MAX)
+    if len(values) == 3:
+        node.items_list()[2].number(ge=0.0, le=R.HEIGHT_MAX)
+    return values
 
 
 def over_table(table: Table, x: float, y: float) -> bool:
@@ -77,11 +92,11 @@ def _orientation(node: Node | None) -> tuple[float, float, float]:
     if node is None:
         return (0.0, 0.0, 0.0)
     if isinstance(node.value, list):
-        roll, pitch, yaw = node.numbers(3)
+        roll, pitch, yaw = node.numbers(3, ge=-R.ANGLE_MAX_DEG, le=R.ANGLE_MAX_DEG)
         return (math.radians(roll), math.radians(pitch), math.radians(yaw))
     if isinstance(node.value, bool) or not isinstance(node.value, int | float):
         node.expected("a yaw angle in degrees or a list [roll, pitch, yaw] in degrees")
-    return (0.0, 0.0, math.radians(node.number()))
+    return (0.0, 0.0, _angle(node))
 
 
 def _body(node: Node, table: Table, names: dict[str, str], *, is_object: bool) -> Body:
@@ -97,10 +112,11 @@ def _body(node: Node, table: Table, names: dict[str, str], *, is_object: bool) -
         name_node.fail(f"duplicate name '{name}' (already used at {names[name]}); names must be unique")
     names[name] = name_node.path
     shape: Shape = _shape(node.get("shape"))
-    size = node.get("size").numbers(SIZE_LENGTHS[shape], gt=0.0)
+    size_max = R.OBJECT_SIZE_MAX if is_object else R.OBSTACLE_SIZE_MAX
+    size = node.get("size").numbers(SIZE_LENGTHS[shape], ge=R.BODY_SIZE_MIN, le=size_max)
     rpy = _orientation(node.opt("orientation"))
     position_node = node.get("position")
-    position = position_node.numbers((2, 3))
+    position = _position(position_node)
     half = vertical_half_extent(shape, size, rpy)
     if len(position) == 3:
         x, y, z = position
@@ -108,7 +124,7 @@ def _body(node: Node, table: Table, names: dict[str, str], *, is_object: bool) -
         x, y = position
         z = (table.height if over_table(table, x, y) else 0.0) + half
     _check_clear_of_table(position_node, table, (x, y, z), half)
-    mass = node.get("mass").positive() if is_object else None
+    mass = node.get("mass").number(ge=R.MASS_MIN, le=R.MASS_MAX) if is_object else None
     friction = node.opt("friction")
     rgba = node.opt("rgba")
     rgba_values = rgba.numbers(4, ge=0.0, le=1.0) if rgba is not None else None
@@ -121,7 +137,7 @@ def _body(node: Node, table: Table, names: dict[str, str], *, is_object: bool) -
         position=(x, y, z),
         orientation_rad=rpy,
         mass=mass,
-        friction=friction.positive() if friction is not None else 1.0,
+        friction=friction.number(ge=R.FRICTION_MIN, le=R.FRICTION_MAX) if friction is not None else 1.0,
         rgba=(rgba_values[0], rgba_values[1], rgba_values[2], rgba_values[3]) if rgba_values else None,
         yaw_symmetry=symmetry,
     )
@@ -181,7 +197,7 @@ def read_transfer(node: Node, scene: SceneConfig) -> TransferTask:
         hint = " (an obstacle; obstacles are static)" if any(b.name == name for b in scene.obstacles) else ""
         object_node.fail(f"unknown object '{name}'{hint}; the scene's objects are: {valid}")
     to_node = node.get("to")
-    to = to_node.numbers((2, 3))
+    to = _position(to_node)
     body = bodies[name]
     if len(to) == 3:
         target: tuple[float, float, float | None] = (to[0], to[1], to[2])
@@ -202,7 +218,7 @@ def read_transfer(node: Node, scene: SceneConfig) -> TransferTask:
     return TransferTask(
         object=name,
         to=target,
-        to_yaw_rad=math.radians(yaw.number()) if yaw is not None else None,
+        to_yaw_rad=_angle(yaw) if yaw is not None else None,
         alternatives=_alternatives(alternatives_node) if alternatives_node is not None else ALTERNATIVES[:3],
     )
 

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import difflib
 import math
+import re
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import NoReturn, TypeVar
@@ -28,6 +29,7 @@ __all__ = [
     "MAX_DOCUMENT_BYTES",
     "MAX_EXPANDED_NODES",
     "Node",
+    "check_model_file",
     "describe",
     "load_yaml_file",
     "load_yaml_text",
@@ -36,6 +38,8 @@ __all__ = [
     "unknown_name",
 ]
 
+#: How much of an MJCF file :func:`check_model_file` reads to tell a model from another file.
+MODEL_HEAD_BYTES = 1 << 16
 #: Largest scenario or profile file accepted.
 MAX_DOCUMENT_BYTES = 1 << 20
 #: Largest document accepted, counting every alias as a full copy of what it names.
@@ -85,14 +89,58 @@ def _quoted(names: Iterable[str]) -> str:
 # ----------------------------------------------------------------------------- YAML
 
 
+#: Scientific notation as people write it (``5e-2``, ``1E3``, ``-2.5e+4``): YAML 1.1 needs a dot and
+#: a sign in the exponent, and reads ``5e-2`` or ``1e3`` as text; YAML 1.2 reads them as floats.
+_FLOAT_12 = re.compile(r"^[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)[eE][-+]?[0-9]+$")
+
+
 class _GuardedLoader(yaml.SafeLoader):
-    """A SafeLoader that rejects over-large (alias-expanded) and recursive documents."""
+    """A SafeLoader that rejects over-large (alias-expanded) and recursive documents and duplicate
+    keys, and reads scientific notation without a dot (``5e-2``) as a float, as YAML 1.2 does."""
 
     def compose_document(self) -> yaml.Node | None:
         node = super().compose_document()
         if node is not None:
             _check_expansion(node)
+            _check_duplicate_keys(node)
         return node
+
+
+_GuardedLoader.add_implicit_resolver("tag:yaml.org,2002:float", _FLOAT_12, list("-+0123456789."))
+
+
+def _check_duplicate_keys(root: yaml.Node) -> None:
+    """Reject a mapping that names a key twice (YAML would keep the last one silently)."""
+    seen_nodes: set[int] = set()
+    stack: list[tuple[yaml.Node, str]] = [(root, "")]
+    while stack:
+        node, path = stack.pop()
+        if id(node) in seen_nodes:
+            continue
+        seen_nodes.add(id(node))
+        if isinstance(node, yaml.SequenceNode):
+            stack.extend((child, f"{path}[{i}]") for i, child in enumerate(node.value))
+        elif isinstance(node, yaml.MappingNode):
+            first: dict[str, yaml.Node] = {}
+            for key_node, value_node in node.value:
+                key = str(key_node.value) if isinstance(key_node, yaml.ScalarNode) else f"<{key_node.id}>"
+                where = f"{path}.{key}" if path else key
+                if key in first and key != "<<":
+                    raise _DuplicateKeyError(where, first[key].start_mark.line + 1, key_node.start_mark)
+                first[key] = key_node
+                stack.append((value_node, where))
+
+
+class _DuplicateKeyError(yaml.MarkedYAMLError):
+    """A key given twice in one mapping: names the key path and both lines."""
+
+    def __init__(self, key_path: str, first_line: int, mark: yaml.Mark) -> None:
+        super().__init__(
+            problem=f"duplicate key '{key_path}' (first at line {first_line}, again at line "
+            f"{mark.line + 1}); YAML would silently keep the last one: give it once",
+            problem_mark=mark,
+        )
+        self.key_path = key_path
 
 
 def _check_expansion(root: yaml.Node) -> None:
@@ -143,6 +191,8 @@ def load_yaml_text(text: str, source: str, error: ErrorType = ScenarioError) -> 
         raise error(source, "", "the document is empty; expected a mapping")
     try:
         data = yaml.load(text, Loader=_GuardedLoader)  # a SafeLoader subclass: safe
+    except _DuplicateKeyError as exc:
+        raise error(source, exc.key_path, str(exc.problem)) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         where = f"line {mark.line + 1}, column {mark.column + 1}: " if mark is not None else ""
@@ -333,13 +383,15 @@ class Node:
         """A finite number >= 0."""
         return self.number(ge=0.0)
 
-    def integer(self, *, ge: int | None = None) -> int:
-        """An int (not a bool, not a float) >= ``ge``."""
+    def integer(self, *, ge: int | None = None, le: int | None = None) -> int:
+        """An int (not a bool, not a float) >= ``ge`` and <= ``le``."""
         value = self.value
         if isinstance(value, bool) or not isinstance(value, int):
             self.expected("an integer")
         if ge is not None and value < ge:
-            self.expected(f"an integer >= {ge}")
+            self.expected(f"an integer >= {ge}" + (f" and <= {le}" if le is not None else ""))
+        if le is not None and value > le:
+            self.expected(f"an integer {f'>= {ge} and ' if ge is not None else ''}<= {le}")
         return value
 
     def boolean(self) -> bool:
@@ -374,6 +426,23 @@ class Node:
         if not exists:
             self.fail(f"{what} not found: {text!r} (resolved to {resolved})")
         return resolved
+
+
+def check_model_file(node: Node, path: Path) -> None:
+    """Fail at ``node`` unless ``path`` looks like an MJCF model (XML whose root is ``<mujoco>``)."""
+    try:
+        with path.open("rb") as handle:
+            head = handle.read(MODEL_HEAD_BYTES)
+    except OSError as exc:
+        node.fail(f"cannot read the MJCF file {str(path)!r}: {exc.strerror or exc}")
+    text = head.lstrip(b"\xef\xbb\xbf \t\r\n")
+    if not text.startswith(b"<") or b"<mujoco" not in head:
+        first = text[:40].decode("utf-8", "replace").splitlines()[0] if text else ""
+        kind = "a YAML file" if path.suffix in (".yaml", ".yml") else f"a {path.suffix or 'plain'} file"
+        node.fail(
+            f"{str(path)!r} is not an MJCF model file (XML with a <mujoco> root element); "
+            f"it is {kind} beginning {first!r}"
+        )
 
 
 def read_fields(

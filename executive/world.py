@@ -218,7 +218,7 @@ def build(
     try:
         model = spec.compile()
     except Exception as exc:
-        raise WorldError(f"{scenario.robot.mjcf}: the scene did not compile: {exc}") from exc
+        raise WorldError(_compile_message(scenario, str(exc))) from exc
     data = mujoco.MjData(model)
     ids = _collect_ids(model, profile, scenario, floor_name, table_names)
     _set_home_joints(model, profile, ids.keyframe)
@@ -226,6 +226,23 @@ def build(
     world = World(model, data, scenario, profile, world_kind, pert, ids)
     world.reset()
     return world
+
+
+def _compile_message(scenario: Scenario, error: str) -> str:
+    """Blame a compile error on the scene element MuJoCo names (an object's size or mass), else the model."""
+    source = scenario.source or scenario.name
+    text = " ".join(error.split())
+    for group, bodies in (("objects", scenario.scene.objects), ("obstacles", scenario.scene.obstacles)):
+        for i, body in enumerate(bodies):
+            if f"Element name '{body.name}'" in error:
+                what = f"size {list(body.size)} m" + (
+                    f", mass {body.mass:g} kg" if body.mass is not None else ""
+                )
+                return (
+                    f"{source}: scene.{group}[{i}].size: the scene did not compile because of '{body.name}' "
+                    f"({what}): {text}; its size (or mass) is too small for MuJoCo"
+                )
+    return f"{source}: the scene did not compile with the robot model {scenario.robot.mjcf}: {text}"
 
 
 def build_pair(scenario: Scenario, rng: np.random.Generator) -> tuple[World, World]:

@@ -41,7 +41,7 @@ from executive import registry
 from executive.errors import RobotProfileError
 from executive.posture import SafePosture
 from executive.robots.profile_types import ArmProfile, FootProfile, GripperProfile, HandFrame, RobotProfile
-from executive.validation import Node, load_yaml_file, load_yaml_text
+from executive.validation import Node, check_model_file, load_yaml_file, load_yaml_text
 
 __all__ = ["SIDES", "load_bundled_profile", "load_profile", "loads_profile", "profile_from_node"]
 
@@ -54,7 +54,10 @@ _TOP_OPTIONAL = ("mjcf", "head_body", "home_joints", "return_along_lane", "safe_
 
 def load_profile(path: Path) -> RobotProfile:
     """Load the profile file at ``path``; a relative ``mjcf`` is resolved against its folder."""
-    path = Path(path).resolve()
+    try:
+        path = Path(path).expanduser().resolve()
+    except (OSError, ValueError, RuntimeError) as exc:  # a symlink loop, a NUL byte, ~nosuchuser
+        raise RobotProfileError(str(path), "", f"invalid profile path: {exc}") from None
     root = load_yaml_file(path, RobotProfileError)
     return profile_from_node(root, base_dir=path.parent, source_path=path)
 
@@ -82,6 +85,8 @@ def profile_from_node(root: Node, base_dir: Path, source_path: Path | None = Non
     name = root.get("name").string()
     mjcf_node = root.opt("mjcf")
     mjcf = mjcf_node.file_path(base_dir, "MJCF file") if mjcf_node is not None else None
+    if mjcf_node is not None and mjcf is not None:
+        check_model_file(mjcf_node, mjcf)
     base_body = root.get("base_body").string()
     torso_body = root.get("torso_body").string()
     head_node = root.opt("head_body")
