@@ -5,6 +5,13 @@ in radians here (field names end in ``_rad``). Positions are in the world
 frame: the robot's base stands at the origin facing +x, +y is its left, +z up.
 Sizes are full edge lengths (not MuJoCo half-sizes): a box ``[x, y, z]``, a
 cylinder ``[radius, length]``, a sphere ``[radius]``.
+
+Every number has a physically meaningful range, written in brackets beside its field
+(``[a, b]`` inclusive, ``(a, b]`` excluding a) and enforced by the readers with a message
+naming the key path, the value and the range; the limits are the constants of
+:mod:`executive.scenario_ranges`. Beyond the ranges, a loaded scene is physically possible
+(:mod:`executive.scene_checks`): no object overlaps an obstacle or another object, every
+object and target rests on the table (or on something on it) within the robot's reach.
 """
 
 from __future__ import annotations
@@ -56,10 +63,10 @@ class RobotSpec:
 class Table:
     """A rectangular table; ``height`` is the height of its top surface."""
 
-    position: tuple[float, float]  # centre of the top, x y (m)
-    size: tuple[float, float, float]  # full extents x y and top thickness (m)
-    height: float  # top surface above the floor (m)
-    yaw_rad: float = 0.0
+    position: tuple[float, float]  # centre of the top, x y (m), each in [-10, 10]; within the robot's reach
+    size: tuple[float, float, float]  # full extents x y (m) in (0, 10] and top thickness (m) in (0, 0.5]
+    height: float  # top surface above the floor (m), (0, 3]
+    yaw_rad: float = 0.0  # [-360, 360] deg in YAML
 
 
 @dataclass(frozen=True)
@@ -68,12 +75,15 @@ class Body:
 
     name: str
     shape: Shape
-    size: tuple[float, ...]  # full extents, see module doc
-    position: tuple[float, float, float]  # centre (m); z defaults to resting on the table
-    orientation_rad: tuple[float, float, float]  # roll, pitch, yaw (rad), applied z-y-x
-    mass: float | None = None  # kg; None for obstacles (static)
-    friction: float = 1.0  # sliding friction coefficient
-    rgba: tuple[float, float, float, float] | None = None
+    # full extents (m), see module doc; each in [0.001, 2] (objects), [0.001, 5] (obstacles)
+    size: tuple[float, ...]
+    # centre (m); x, y in [-10, 10], z in [0, 5]; z defaults to resting on the table
+    position: tuple[float, float, float]
+    # roll, pitch, yaw (rad), applied z-y-x; each [-360, 360] deg in YAML
+    orientation_rad: tuple[float, float, float]
+    mass: float | None = None  # kg, [0.001, 50]; None for obstacles (static)
+    friction: float = 1.0  # sliding friction coefficient, [0.01, 5]
+    rgba: tuple[float, float, float, float] | None = None  # each [0, 1]
     # Order of the object's rotational symmetry about its vertical axis: a half turn (2) leaves
     # a plain box where it was; 1 (default) means its yaw matters (a labelled container, a book
     # whose spine must face one way). Yaw errors count modulo 2*pi / yaw_symmetry.
@@ -105,21 +115,21 @@ class Uncertainty:
     (0.1 = 10 %); friction: relative.
     """
 
-    object_position: float = 0.0
-    object_yaw_rad: float = 0.0
-    obstacle_position: float = 0.0
-    com: float = 0.0
-    object_mass: float = 0.0
-    friction: float = 0.0
+    object_position: float = 0.0  # m, [0, 0.2]
+    object_yaw_rad: float = 0.0  # [0, 180] deg in YAML
+    obstacle_position: float = 0.0  # m, [0, 0.2]
+    com: float = 0.0  # m, [0, 0.1]
+    object_mass: float = 0.0  # relative, [0, 1]
+    friction: float = 0.0  # relative, [0, 1]
 
 
 @dataclass(frozen=True)
 class CollisionRiskConfig:
     """Seed collision metric: ``r(t) = (1 - d/d_safety)^exponent`` inside ``d_safety``."""
 
-    exponent: float = 2.0
-    peak_weight: float = 0.5
-    exposure_weight: float = 0.5
+    exponent: float = 2.0  # (0, 10]
+    peak_weight: float = 0.5  # [0, 100]
+    exposure_weight: float = 0.5  # [0, 100]
 
 
 @dataclass(frozen=True)
@@ -129,31 +139,33 @@ class FallRiskConfig:
     ``circle_radius`` None means: use the scenario's CoM 1-sigma times ``sigmas``.
     """
 
-    circle_radius: float | None = None
-    sigmas: float = 2.0
-    exponent: float = 2.0
+    circle_radius: float | None = None  # m, (0, 1]
+    sigmas: float = 2.0  # (0, 10]
+    exponent: float = 2.0  # (0, 10]
 
 
 @dataclass(frozen=True)
 class GraspRiskConfig:
     """Seed grasp metric: logistic in the translational and angular pre-grasp error."""
 
-    position_scale: float = 0.02  # m, error at which the positional term is 0.5
-    position_max: float = 0.05  # m, error beyond which the grasp surely fails (x_max)
-    angle_scale_rad: float = 0.17  # rad
-    angle_max_rad: float = 0.52  # rad
-    steepness: float = 1.0  # b in the seed's form
-    position_weight: float = 0.6
-    angle_weight: float = 0.4
+    position_scale: float = 0.02  # m, (0, 0.5], error at which the positional term is 0.5
+    position_max: float = 0.05  # m, (0, 0.5], error beyond which the grasp surely fails (x_max); > scale
+    angle_scale_rad: float = 0.17  # rad; (0, 180] deg in YAML
+    angle_max_rad: float = 0.52  # rad; (0, 180] deg in YAML; > angle_scale
+    steepness: float = 1.0  # b in the seed's form, (0, 100]
+    position_weight: float = 0.6  # [0, 100]; position_weight + angle_weight > 0
+    angle_weight: float = 0.4  # [0, 100]
 
 
 @dataclass(frozen=True)
 class Severity:
     """Cost of each failure mode (dimensionless, relative) and per body part for collisions."""
 
-    collision: float = 3.0
-    fall: float = 10.0
-    drop: float = 2.0
+    collision: float = 3.0  # (0, 1000]
+    fall: float = 10.0  # (0, 1000]
+    drop: float = 2.0  # (0, 1000]
+    # Factor on the collision severity per body part, each (0, 1000]; a name is a label (head, hand,
+    # forearm) or a body of the robot's MJCF (executive.robot_model); any other name is rejected.
     body_parts: tuple[tuple[str, float], ...] = (("head", 3.0), ("hand", 1.5), ("forearm", 1.0))
 
 
@@ -161,9 +173,11 @@ class Severity:
 class GuardConfig:
     """Live risk guards (behaviours/guard.py): limits re-checked on every tick while a motion runs."""
 
-    min_distance: float = 0.01  # m: least robot-environment distance, now and over the look-ahead
-    lookahead_s: float = 0.3  # s: how far along the planned trajectory the distance is predicted
-    min_com_margin: float = 0.02  # m: least CoM margin inside the support polygon of the foot contacts
+    min_distance: float = 0.01  # m, [0, 0.5]: least robot-environment distance, now and over the look-ahead
+    lookahead_s: float = 0.3  # s, [0, 5]: how far along the planned trajectory the distance is predicted
+    # m, [0, 0.3]: least CoM margin inside the support polygon of the foot contacts; a negative margin
+    # would let the CoM leave the feet before the guard trips (the fall guard off) and is rejected
+    min_com_margin: float = 0.02
 
 
 @dataclass(frozen=True)
@@ -177,27 +191,39 @@ class RolloutConfig:
     The dry run (each alternative once on the estimate) always runs; it is not configured here.
     """
 
-    count: int = 4  # most rollouts per alternative; 0: off (the dry runs still run)
-    min_count: int = 4  # rollouts per alternative before the stopping rule may stop
-    batch: int = 4  # rollouts per alternative per round
-    budget_s: float = 30.0  # s of wall time for all rollouts of one decision
-    confidence: float = 0.95  # posterior probability at which the stopping rule calls the choice clear
-    indifference: float = 0.05  # in the ordering's units: a choice this close to the best is as good
-    prior_weight: float = 10.0  # pseudo-trials the analytic prediction counts for
-    jobs: int = 2  # worker processes
+    count: int = 4  # [0, 1000] most rollouts per alternative; 0: off (the dry runs still run)
+    min_count: int = 4  # [1, 1000] rollouts per alternative before the stopping rule may stop; <= count
+    batch: int = 4  # [1, 1000] rollouts per alternative per round
+    budget_s: float = 30.0  # (0, 3600] s of wall time for all rollouts of one decision
+    confidence: float = (
+        0.95  # (0.5, 0.999] posterior probability at which the stopping rule calls the choice clear
+    )
+    indifference: float = (
+        0.05  # [0, 1000] in the ordering's units: a choice this close to the best is as good
+    )
+    prior_weight: float = 10.0  # [0, 10000] pseudo-trials the analytic prediction counts for
+    jobs: int = 2  # [1, 256] worker processes
 
 
 @dataclass(frozen=True)
 class RiskConfig:
     """Everything the risk models and the selector take from the scenario."""
 
-    d_safety: float = 0.05
+    d_safety: float = 0.05  # m, (0, 1]
     collision: CollisionRiskConfig = field(default_factory=CollisionRiskConfig)
     fall: FallRiskConfig = field(default_factory=FallRiskConfig)
     grasp: GraspRiskConfig = field(default_factory=GraspRiskConfig)
-    weights: tuple[tuple[str, float], ...] = (("collision", 1.0), ("fall", 2.0), ("grasp", 1.0))
+    weights: tuple[tuple[str, float], ...] = (
+        ("collision", 1.0),
+        ("fall", 2.0),
+        ("grasp", 1.0),
+    )  # each [0, 100]
     severity: Severity = field(default_factory=Severity)
     ordering: Literal["weighted_sum", "probability", "expected_loss"] = "expected_loss"
+    # >= 0 and below the largest value the ordering can take (executive.scenario.max_ordering_value:
+    # probability 1; weighted_sum the collision weight x (peak_weight + exposure_weight) + the fall and
+    # grasp weights; expected_loss the collision severity x the largest body-part factor + fall + drop):
+    # a threshold no alternative can exceed would never ask for approval, and is rejected.
     threshold: float = 0.3
     guard: GuardConfig = field(default_factory=GuardConfig)
     rollouts: RolloutConfig = field(default_factory=RolloutConfig)
@@ -206,7 +232,7 @@ class RiskConfig:
 @dataclass(frozen=True)
 class ApprovalConfig:
     mode: Literal["prompt", "auto", "deny"] = "deny"
-    timeout_s: float = 60.0
+    timeout_s: float = 60.0  # s, (0, 86400]
 
 
 @dataclass(frozen=True)
@@ -214,8 +240,10 @@ class TransferTask:
     """Move ``object`` to ``to`` (centre x, y[, z]); z None means resting on the table."""
 
     object: str
+    # x, y in [-10, 10], z in [0, 5] (m): over the table, within the robot's reach, the object there
+    # clear of obstacles and other objects; with z it must rest on the table or on something on it
     to: tuple[float, float, float | None]
-    to_yaw_rad: float | None = None  # None: keep the object's yaw
+    to_yaw_rad: float | None = None  # None: keep the object's yaw; [-360, 360] deg in YAML
     alternatives: tuple[str, ...] = ALTERNATIVES[:3]
 
     @property
@@ -240,10 +268,10 @@ class SceneVariation:
     every trial has the scenario's sigmas.
     """
 
-    object_position: float = 0.0
-    object_yaw_rad: float = 0.0
-    obstacle_position: float = 0.0
-    perception_scale: tuple[float, float] = (1.0, 1.0)
+    object_position: float = 0.0  # m, [0, 0.2]
+    object_yaw_rad: float = 0.0  # [0, 180] deg in YAML
+    obstacle_position: float = 0.0  # m, [0, 0.2]
+    perception_scale: tuple[float, float] = (1.0, 1.0)  # each (0, 10], low <= high
 
     def is_zero(self) -> bool:
         return (
@@ -261,8 +289,8 @@ class SceneVariation:
 
 @dataclass(frozen=True)
 class TrialsConfig:
-    count: int = 10
-    seed: int = 0
+    count: int = 10  # [1, 100000]
+    seed: int = 0  # [0, 2**32 - 1]
     scene_variation: SceneVariation = field(default_factory=SceneVariation)
 
 

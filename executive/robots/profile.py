@@ -48,6 +48,14 @@ __all__ = ["SIDES", "load_bundled_profile", "load_profile", "loads_profile", "pr
 #: The sides every profile describes, for arms, legs and feet.
 SIDES: tuple[str, ...] = ("left", "right")
 
+#: Ranges of the profile's numbers: home_joints angles (rad) within +-2 pi; safe_posture drops and
+#: tolerances (m) in [0, 0.5] (its angles in [0, 90] deg); a hand frame's offset (m) within +-1;
+#: gripper actuator targets within +-10 (the actuator's units: m for slides, rad for hinges).
+JOINT_ANGLE_MAX = 2.0 * math.pi
+POSTURE_DROP_MAX = 0.5
+HAND_OFFSET_MAX = 1.0
+GRIPPER_TARGET_MAX = 10.0
+
 _TOP_REQUIRED = ("name", "base_body", "torso_body", "keyframe", "waist_joints", "legs", "feet", "arms")
 _TOP_OPTIONAL = ("mjcf", "head_body", "home_joints", "return_along_lane", "safe_posture")
 
@@ -93,7 +101,11 @@ def profile_from_node(root: Node, base_dir: Path, source_path: Path | None = Non
     head_body = head_node.string() if head_node is not None else None
     keyframe = root.get("keyframe").string()
     home_node = root.opt("home_joints")
-    home_joints = {name: node.number() for name, node in home_node.items()} if home_node is not None else {}
+    home_joints = (
+        {name: node.number(ge=-JOINT_ANGLE_MAX, le=JOINT_ANGLE_MAX) for name, node in home_node.items()}
+        if home_node is not None
+        else {}
+    )
     lane_node = root.opt("return_along_lane")
     return_along_lane = lane_node.boolean() if lane_node is not None else False
     waist_joints = root.get("waist_joints").strings()
@@ -130,7 +142,11 @@ def _safe_posture(node: Node) -> SafePosture:
     for key in keys:
         child = node.opt(key)
         if child is not None:
-            values[key] = child.number(ge=0.0, le=90.0) if key.endswith("deg") else child.number(ge=0.0)
+            values[key] = (
+                child.number(ge=0.0, le=90.0)
+                if key.endswith("deg")
+                else child.number(ge=0.0, le=POSTURE_DROP_MAX)
+            )
     return SafePosture(**values)
 
 
@@ -170,10 +186,14 @@ def _hand(node: Node) -> HandFrame:
                 node.child(key, None).fail(f"'{key}' only applies with 'body', not with 'site'")
         return HandFrame(site=site.string() if site is not None else None, closing_yaw_deg=closing)
     offset_node, quat_node = node.opt("offset"), node.opt("quat")
-    offset = offset_node.numbers(3) if offset_node is not None else (0.0, 0.0, 0.0)
+    offset = (
+        offset_node.numbers(3, ge=-HAND_OFFSET_MAX, le=HAND_OFFSET_MAX)
+        if offset_node is not None
+        else (0.0, 0.0, 0.0)
+    )
     quat = (1.0, 0.0, 0.0, 0.0)
     if quat_node is not None:
-        raw = quat_node.numbers(4)
+        raw = quat_node.numbers(4, ge=-1e3, le=1e3)
         norm = math.sqrt(sum(q * q for q in raw))
         if norm < 1e-6:
             quat_node.fail("expected a unit quaternion [w, x, y, z], got a zero quaternion")
@@ -195,7 +215,7 @@ def _gripper(node: Node) -> GripperProfile:
         child = node.get(key)
         if not isinstance(child.value, list) or len(child.value) != n:
             child.expected(f"a list of {n} numbers (one per actuator)")
-        targets[key] = child.numbers(n)
+        targets[key] = child.numbers(n, ge=-GRIPPER_TARGET_MAX, le=GRIPPER_TARGET_MAX)
     return GripperProfile(actuators=actuators, open=targets["open"], closed=targets["closed"])
 
 
