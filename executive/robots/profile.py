@@ -48,10 +48,11 @@ __all__ = ["SIDES", "load_bundled_profile", "load_profile", "loads_profile", "pr
 #: The sides every profile describes, for arms, legs and feet.
 SIDES: tuple[str, ...] = ("left", "right")
 
-#: Ranges of the profile's numbers: home_joints angles (rad) within +-2 pi; safe_posture drops and
+#: Ranges of the profile's numbers: home_joints angles (rad) within +-4 pi (two turns; the world
+#: builder checks each against its joint's own range); safe_posture drops and
 #: tolerances (m) in [0, 0.5] (its angles in [0, 90] deg); a hand frame's offset (m) within +-1;
 #: gripper actuator targets within +-10 (the actuator's units: m for slides, rad for hinges).
-JOINT_ANGLE_MAX = 2.0 * math.pi
+JOINT_ANGLE_MAX = 4.0 * math.pi
 POSTURE_DROP_MAX = 0.5
 HAND_OFFSET_MAX = 1.0
 GRIPPER_TARGET_MAX = 10.0
