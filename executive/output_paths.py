@@ -75,7 +75,7 @@ def _as_path(option: str, path: str | Path) -> Path:
         raise OutputPathError(option, "''", "an empty path")
     if "\0" in text:
         raise OutputPathError(option, repr(text), "contains a NUL byte")
-    return Path(text).expanduser()
+    return Path(text)  # as the writer will open it: a quoted "~" is a folder named "~"
 
 
 def check_folder(path: str | Path, option: str) -> Path:
