@@ -32,8 +32,9 @@ def render_rgb(
     """Render the world's current state to an RGB array (height x width x 3)."""
     if width > world.model.vis.global_.offwidth or height > world.model.vis.global_.offheight:
         raise ExecutiveError(
-            f"picture size {width}x{height} exceeds the model's offscreen buffer "
-            f"{world.model.vis.global_.offwidth}x{world.model.vis.global_.offheight}"
+            f"picture size {width}x{height} (--width x --height) exceeds the model's offscreen buffer "
+            f"{world.model.vis.global_.offwidth}x{world.model.vis.global_.offheight} "
+            "(<visual><global offwidth offheight> in its MJCF): the largest picture it renders"
         )
     cam = camera if camera is not None else overview_camera(world)
     try:

@@ -239,3 +239,38 @@ def test_the_console_script_says_the_same(args: list[str], needle: str, tmp_path
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path, timeout=60)
     assert done.returncode == 2
     assert needle in done.stderr and "Traceback" not in done.stderr
+
+
+# --- after the run -----------------------------------------------------------------------
+
+
+def test_a_picture_larger_than_the_offscreen_buffer(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    argv = ["show", "book_transfer", "--png", str(tmp_path / "big.png"), "--width", "16000"]
+    _bad(argv, capsys, "picture size 16000x720", "--width", "offscreen buffer")
+    assert not (tmp_path / "big.png").exists()
+
+
+def test_a_video_that_cannot_be_saved_after_the_run_keeps_the_outcome(
+    read_only: Path, tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The folder was writable when the run started and is not when it ends: the video is
+    reported lost on stderr and the mission's exit code stands (no exception, no exit 1)."""
+    from executive.cli import _save_video
+    from executive.errors import ExecutiveError
+    from executive.render import VideoRecorder
+    from executive.scenario import load
+    from executive.world import build
+
+    world = build(load("book_transfer"))
+    try:
+        recorder = VideoRecorder(world, read_only / "run.gif", width=64, height=48)
+    except ExecutiveError as exc:  # no OpenGL context here: nothing to record
+        pytest.skip(f"offscreen rendering unavailable: {exc}")
+    recorder.capture()
+    _save_video(recorder)
+    err = capsys.readouterr().err
+    assert "the video was not saved" in err and str(read_only / "run.gif") in err
+    assert "Traceback" not in err
+    assert list(read_only.iterdir()) == []
