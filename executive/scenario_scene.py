@@ -60,10 +60,13 @@ def _angle(node: Node) -> float:
 
 def _position(node: Node) -> tuple[float, ...]:
     """[x, y] or [x, y, z] (m): |x|, |y| within POSITION_MAX, z within [0, HEIGHT_MAX]."""
-    values = node.numbers((2, 3), ge=-R.POSITION_MAX, le=R.POSITION_MAX)
-    if len(values) == 3:
-        node.items_list()[2].number(ge=0.0, le=R.HEIGHT_MAX)
-    return values
+    if not isinstance(node.value, list) or len(node.value) not in (2, 3):
+        node.expected("a list of 2 or 3 numbers")
+    items = node.items_list()
+    values = [item.number(ge=-R.POSITION_MAX, le=R.POSITION_MAX) for item in items[:2]]
+    if len(items) == 3:
+        values.append(items[2].number(ge=0.0, le=R.HEIGHT_MAX))
+    return tuple(values)
 
 
 def over_table(table: Table, x: float, y: float) -> bool:
