@@ -7,11 +7,15 @@ The executive never blocks inside a tick, so approval is asynchronous:
    :class:`PendingApproval` with the scenario's timeout;
 2. it hands it to an :class:`ApprovalChannel` with ``submit()``, which returns at once;
 3. every tick it polls ``pending.decision``: None while waiting (the robot holds);
-   an :class:`ApprovalDecision` (approve an alternative, re-plan, abort) once
+   an :class:`ApprovalDecision` (approve an alternative, re-plan, deny, abort) once
    answered; an abort "by timeout" once the deadline passes unanswered.
 
+``deny`` (the risk is refused: by the ``deny`` policy, or an operator's ``d``) and
+``abort`` (the run is given up: ``q``, end of input, Ctrl-C, a timeout, a halt) both end
+the task ``aborted``; the audit log keeps which it was and by whom.
+
 Channels: :class:`PolicyChannel` (``auto`` approves the recommended alternative,
-``deny`` aborts), :class:`CallbackChannel` (a host function answers now or later),
+``deny`` denies), :class:`CallbackChannel` (a host function answers now or later),
 :class:`HostChannel` (requests wait for the host to answer), :class:`TerminalChannel`
 (an interactive prompt in a background thread). :func:`make_channel` picks one
 from a mode name.
@@ -20,6 +24,7 @@ from a mode name.
 from __future__ import annotations
 
 import getpass
+import math
 import os
 import select
 import sys
@@ -43,7 +48,8 @@ __all__ = [
     "make_channel",
 ]
 
-Decision = Literal["approve", "replan", "abort"]
+Decision = Literal["approve", "replan", "deny", "abort"]
+DECISIONS = ("approve", "replan", "deny", "abort")
 MODES = ("prompt", "auto", "deny")
 
 
@@ -100,7 +106,7 @@ class ApprovalRequest:
 class ApprovalDecision:
     decision: Decision
     alternative: str | None  # the approved alternative (approve only)
-    by: str  # policy:auto, policy:deny, timeout, operator:<user>, host:<name>, callback:<name>
+    by: str  # policy:auto, policy:deny, timeout, halt, operator:<user>, operator:interrupt, host:<name>, ...
     at: str  # ISO 8601 UTC
     note: str = ""
 
@@ -130,8 +136,8 @@ class PendingApproval:
 
     def answer(self, decision: ApprovalDecision) -> bool:
         """Record ``decision`` unless one was recorded already; True if it was taken."""
-        if decision.decision not in ("approve", "replan", "abort"):
-            raise ValueError(f"decision must be approve, replan or abort, not {decision.decision!r}")
+        if decision.decision not in DECISIONS:
+            raise ValueError(f"decision must be one of {', '.join(DECISIONS)}, not {decision.decision!r}")
         if decision.decision == "approve":
             if decision.alternative is None or not self.request.feasible(decision.alternative):
                 names = [a.name for a in self.request.alternatives if a.feasible]
@@ -169,7 +175,7 @@ class ApprovalChannel(Protocol):
 
 
 class PolicyChannel:
-    """Batch policies: ``auto`` approves the recommended alternative, ``deny`` aborts."""
+    """Batch policies: ``auto`` approves the recommended alternative, ``deny`` denies (logged ``deny``)."""
 
     def __init__(self, mode: str) -> None:
         if mode not in ("auto", "deny"):
@@ -181,8 +187,11 @@ class PolicyChannel:
         recommended = pending.request.recommended
         if self.mode == "auto" and recommended is not None:
             pending.answer(ApprovalDecision("approve", recommended, by=self.name, at=_now()))
+        elif self.mode == "auto":  # nothing feasible to approve
+            note = "no feasible alternative to approve"
+            pending.answer(ApprovalDecision("abort", None, by=self.name, at=_now(), note=note))
         else:
-            pending.answer(ApprovalDecision("abort", None, by=self.name, at=_now()))
+            pending.answer(ApprovalDecision("deny", None, by=self.name, at=_now()))
 
 
 class CallbackChannel:
@@ -228,6 +237,9 @@ class HostChannel:
     def abort(self, pending: PendingApproval, by: str | None = None) -> None:
         pending.answer(ApprovalDecision("abort", None, by=by or self.name, at=_now()))
 
+    def deny(self, pending: PendingApproval, by: str | None = None) -> None:
+        pending.answer(ApprovalDecision("deny", None, by=by or self.name, at=_now()))
+
 
 def request_table(request: ApprovalRequest) -> str:
     """The request as the operator sees it."""
@@ -258,16 +270,23 @@ class TerminalChannel:
     """An interactive prompt on a terminal, answered in a background thread.
 
     Enter or ``a``: approve the recommended; a row number or a name: approve that one;
-    ``r``: re-plan; ``q``/``abort``: abort; end of input: abort.
+    ``r``: re-plan; ``d``/``deny``: deny; ``q``/``abort``: abort; end of input: abort.
 
     On a terminal the thread waits for input with ``select`` in short slices, so once the
     request is resolved some other way (timeout, halt, another channel) it stops at once
     without swallowing the operator's next line. Prompts of one channel are shown one at a
     time. Streams without a file descriptor (tests) are read with a plain ``readline``.
+
+    With a timeout, a line above the prompt counts down the seconds left; on a terminal it
+    is redrawn in place every second (cursor saved, moved up, restored), so what the
+    operator is typing stays where it is. A display that prints on the same terminal sets
+    ``wait_for_display`` and calls :meth:`screen_free` once it has printed what precedes a
+    request (its risk table): the prompt is drawn after that, never under it.
     """
 
-    PROMPT = "approve [Enter/a] | choose [# or name] | re-plan [r] | abort [q] > "
+    PROMPT = "approve [Enter/a] | choose [# or name] | re-plan [r] | deny [d] | abort [q] > "
     POLL_S = 0.05
+    DISPLAY_WAIT_S = 5.0  # longest wait for the display before the prompt is drawn anyway
 
     def __init__(
         self,
@@ -286,11 +305,32 @@ class TerminalChannel:
         self.name = "prompt"
         self.threads: list[threading.Thread] = []
         self._one_at_a_time = threading.Lock()
+        self.wait_for_display = False
+        self._screen = threading.Condition()
+        self._free_for: list[PendingApproval] = []
 
     def submit(self, pending: PendingApproval) -> None:
         thread = threading.Thread(target=self._run, args=(pending,), name="approval-prompt", daemon=True)
         self.threads.append(thread)
         thread.start()
+
+    def screen_free(self, pending: PendingApproval) -> None:
+        """The display has printed everything before ``pending``: its prompt may be drawn."""
+        with self._screen:
+            if pending not in self._free_for:
+                self._free_for.append(pending)
+            self._screen.notify_all()
+
+    def _await_display(self, pending: PendingApproval) -> None:
+        if not self.wait_for_display:
+            return
+        deadline = time.monotonic() + self.DISPLAY_WAIT_S
+        with self._screen:
+            while pending not in self._free_for and pending.decision is None:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    break
+                self._screen.wait(min(left, self.POLL_S))
 
     def _say(self, text: str) -> None:
         self.output.write(text)
@@ -302,11 +342,13 @@ class TerminalChannel:
         names = [a.name for a in request.alternatives]
         if answer.lower() in ("", "a", "approve", "y", "yes"):
             if request.recommended is None:
-                return "nothing to approve: no alternative is feasible (r to re-plan, q to abort)"
+                return "nothing to approve: no alternative is feasible (r to re-plan, d to deny, q to abort)"
             return ApprovalDecision("approve", request.recommended, by=self.by, at=_now())
         if answer.lower() in ("r", "replan", "re-plan"):
             return ApprovalDecision("replan", None, by=self.by, at=_now())
-        if answer.lower() in ("q", "quit", "abort", "n", "no"):
+        if answer.lower() in ("d", "deny", "n", "no"):
+            return ApprovalDecision("deny", None, by=self.by, at=_now())
+        if answer.lower() in ("q", "quit", "abort"):
             return ApprovalDecision("abort", None, by=self.by, at=_now())
         row = answer.isascii() and answer.isdigit() and 1 <= int(answer) <= len(names)
         chosen = names[int(answer) - 1] if row else answer
@@ -314,17 +356,34 @@ class TerminalChannel:
             if not request.feasible(chosen):
                 return f"{chosen} is infeasible and cannot be approved"
             return ApprovalDecision("approve", chosen, by=self.by, at=_now(), note="chosen by the operator")
-        return f"not understood: {answer!r}; valid: Enter/a, 1-{len(names)}, {', '.join(names)}, r, q"
+        return f"not understood: {answer!r}; valid: Enter/a, 1-{len(names)}, {', '.join(names)}, r, d, q"
 
-    def _readable(self, pending: PendingApproval) -> bool:
-        """Wait until a line can be read (True) or the request is resolved otherwise (False)."""
+    @staticmethod
+    def countdown_text(remaining_s: float) -> str:
+        """The line above the prompt while a request with a timeout waits."""
+        return f"  {math.ceil(remaining_s):d} s left to answer (then abort)"
+
+    def _is_tty(self, stream: IO[str]) -> bool:
         try:
-            fd = self.input.fileno()
-            polled = os.isatty(fd)
+            return os.isatty(stream.fileno())
         except (AttributeError, OSError, ValueError):  # no descriptor (StringIO) or closed
-            polled = False
-        if not polled:
+            return False
+
+    def _tick_countdown(self, pending: PendingApproval, shown: list[int]) -> None:
+        """Redraw the countdown line above the prompt when its whole second changes."""
+        remaining = pending.remaining_s
+        if remaining is None or not shown:
+            return
+        second = math.ceil(remaining)
+        if second != shown[0]:
+            shown[0] = second
+            self._say("\x1b7\x1b[1A\r\x1b[2K" + self.countdown_text(remaining) + "\x1b8")
+
+    def _readable(self, pending: PendingApproval, shown: list[int]) -> bool:
+        """Wait until a line can be read (True) or the request is resolved otherwise (False)."""
+        if not self._is_tty(self.input):
             return pending.decision is None
+        fd = self.input.fileno()
         while pending.decision is None:
             try:
                 ready, _, _ = select.select([fd], [], [], self.POLL_S)
@@ -332,6 +391,7 @@ class TerminalChannel:
                 return True
             if ready:
                 return True
+            self._tick_countdown(pending, shown)
         return False
 
     def _run(self, pending: PendingApproval) -> None:
@@ -339,6 +399,7 @@ class TerminalChannel:
             if pending.decision is not None:  # resolved while an earlier prompt was showing
                 return
         try:
+            self._await_display(pending)
             self._ask(pending)
         except (OSError, ValueError) as exc:  # the terminal went away (closed, hung up)
             note = f"terminal error: {exc}"
@@ -346,15 +407,25 @@ class TerminalChannel:
         finally:
             self._one_at_a_time.release()
 
+    def _prompt(self, pending: PendingApproval, shown: list[int]) -> None:
+        """The countdown line (with a timeout) and the prompt."""
+        remaining = pending.remaining_s
+        if remaining is not None:
+            live = self._is_tty(self.output)
+            shown[:] = [math.ceil(remaining)] if live else []
+            self._say(self.countdown_text(remaining) + "\n")
+        self._say(self.PROMPT)
+
     def _ask(self, pending: PendingApproval) -> None:
         request = pending.request
         if pending.decision is not None:
             return
         timeout = f" (abort in {pending.timeout_s:g} s without an answer)" if pending.timeout_s else ""
         self._say("\n" + request_table(request) + timeout + "\n")
+        shown: list[int] = []
         while pending.decision is None:
-            self._say(self.PROMPT)
-            if not self._readable(pending):
+            self._prompt(pending, shown)
+            if not self._readable(pending, shown):
                 break
             line = self.input.readline()
             if pending.decision is not None:  # resolved meanwhile (timeout, halt)

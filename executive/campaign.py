@@ -749,10 +749,11 @@ def table_markdown(summary: dict[str, Any]) -> str:
 
 
 def _reliability(records: Sequence[dict[str, Any]], path: Path) -> Path:
+    from executive.audit import atomic_replace
     from executive.stats import reliability_diagram
 
     curves = [(f"{mode} by P({key})", p, y) for mode, key, p, y in _forecasts(_executed(records))]
-    return reliability_diagram(curves, path)
+    return atomic_replace(path, lambda tmp: reliability_diagram(curves, tmp))
 
 
 # --- the campaign ------------------------------------------------------------------------------
@@ -780,10 +781,19 @@ def _fingerprint(scenario: Scenario) -> str:
 
 
 def _check_resume(folder: Path, config: dict[str, Any]) -> None:
+    """The campaign in ``folder`` is the one ``config`` asks for (else an ExecutiveError naming the key)."""
     path = folder / "campaign.json"
     if not path.is_file():
         raise ExecutiveError(f"--resume: {folder} holds no campaign.json (is it a campaign's run folder?)")
-    old = json.loads(path.read_text(encoding="utf-8"))
+    try:
+        old = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ExecutiveError(
+            f"--resume: {path} cannot be read as JSON ({exc}); it was cut or edited. Its trials are "
+            "still in trials.jsonl: start a new campaign with another --out"
+        ) from None
+    if not isinstance(old, dict):
+        raise ExecutiveError(f"--resume: {path} is not a campaign's settings (a JSON object expected)")
     for key in ("scenario", "scenario_sha256", "seed", "task", "alternatives"):
         if old.get(key) != config[key]:
             raise ExecutiveError(
@@ -791,6 +801,39 @@ def _check_resume(folder: Path, config: dict[str, Any]) -> None:
                 f"for {config[key]!r}. Resume with the same scenario, seed, task and alternatives, "
                 "or start a new campaign with another --out"
             )
+
+
+def unique_trials(
+    records: Sequence[dict[str, Any]], trials: int, names: Sequence[str]
+) -> tuple[list[dict[str, Any]], int, int]:
+    """The records that count: the first of each (trial, alternative) with trial < ``trials``.
+
+    Returns them, the number of duplicates dropped (a record written twice, e.g. by two
+    resumes racing) and the number beyond ``trials`` (kept on disk, not counted: a campaign
+    resumed with a smaller ``--trials``). So a campaign is complete exactly when every
+    (trial, alternative) it asks for is there, whatever else the file holds.
+    """
+    seen: set[tuple[Any, Any]] = set()
+    kept: list[dict[str, Any]] = []
+    duplicates = beyond = 0
+    for record in records:
+        key = (record["trial"], record["alternative"])
+        if key in seen:
+            duplicates += 1
+            continue
+        seen.add(key)
+        if not isinstance(record["trial"], int) or not 0 <= record["trial"] < trials:
+            beyond += 1
+            continue
+        if record["alternative"] in names:
+            kept.append(record)
+    return kept, duplicates, beyond
+
+
+def _write_config(folder: Path, config: dict[str, Any]) -> None:
+    from executive.audit import atomic_write_text
+
+    atomic_write_text(folder / "campaign.json", json.dumps(config, indent=2) + "\n")
 
 
 def run_campaign(
@@ -807,7 +850,7 @@ def run_campaign(
     stream: IO[str] | None = None,
 ) -> CampaignResult:
     """Run (or complete) a campaign; write trials.jsonl, summary.json, table.md, reliability.png."""
-    from executive.audit import run_folder, to_json, write_summary
+    from executive.audit import atomic_write_text, run_folder, to_json, write_summary
     from executive.progress_bar import ProgressBar
 
     n = scenario.trials.count if trials is None else trials
@@ -852,9 +895,9 @@ def run_campaign(
             "or choose another --out"
         )
     folder.mkdir(parents=True, exist_ok=True)
-    (folder / "campaign.json").write_text(json.dumps(config, indent=2) + "\n", encoding="utf-8")
+    _write_config(folder, config)
 
-    records = read_trials(trials_path, repair=True)
+    records, duplicates, beyond = unique_trials(read_trials(trials_path, repair=True), n, names)
     done = {(r["trial"], r["alternative"]) for r in records}
     specs = [(i, a, trial_seed(base_seed, i)) for i in range(n) for a in names if (i, a) not in done]
     log = print if stream is None else (lambda text: (stream.write(text + "\n"), stream.flush()))
@@ -865,6 +908,13 @@ def run_campaign(
     )
     if records:
         log(f"resuming: {len(records)} trial(s) already in {trials_path.name}, {len(specs)} to run")
+    if duplicates:
+        log(
+            f"  {duplicates} duplicated record(s) in {trials_path.name} "
+            "(same trial and alternative): counted once"
+        )
+    if beyond:
+        log(f"  {beyond} record(s) beyond --trials {n} in {trials_path.name}: kept there, not counted")
     t0 = time.perf_counter()
     runner = _Runner(scenario, task_index, jobs, backend, folder)
     interrupted = False
@@ -924,9 +974,11 @@ def run_campaign(
         new_trials=new,
         trials_per_s=new / elapsed if elapsed > 0 else None,
         trial_phase_s=_finite(trial_phase),  # executing trials only (after planning, before statistics)
+        duplicates_ignored=duplicates,
+        records_beyond_trials=beyond,
     )
     write_summary(folder, to_json(summary))
-    (folder / "table.md").write_text(table_markdown(summary) + "\n", encoding="utf-8")
+    atomic_write_text(folder / "table.md", table_markdown(summary) + "\n")
     if records:
         _reliability(records, folder / "reliability.png")
     return CampaignResult(folder, summary, records, new, elapsed, interrupted)

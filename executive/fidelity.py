@@ -36,6 +36,7 @@ from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
+from executive.audit import atomic_write_text
 from executive.errors import ExecutiveError
 from executive.scenario_types import Scenario
 
@@ -90,7 +91,15 @@ def _prepare(folder: Path, config: dict[str, Any], resume: bool) -> None:
     if resume:
         if not path.is_file():
             raise ExecutiveError(f"--resume: {folder} holds no suite.json (is it a fidelity suite's folder?)")
-        old = json.loads(path.read_text(encoding="utf-8"))
+        try:
+            old = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise ExecutiveError(
+                f"--resume: {path} cannot be read as JSON ({exc}); it was cut or edited: "
+                "start a new suite with another --out"
+            ) from None
+        if not isinstance(old, dict):
+            raise ExecutiveError(f"--resume: {path} is not a suite's settings (a JSON object expected)")
         for key in ("scenario", "scenario_sha256", "seed", "rollouts"):
             if old.get(key) != config[key]:
                 raise ExecutiveError(
@@ -103,7 +112,7 @@ def _prepare(folder: Path, config: dict[str, Any], resume: bool) -> None:
             f"{folder} already holds a fidelity suite: add --resume to complete it, or choose another --out"
         )
     check_folder(folder)
-    path.write_text(json.dumps(config, indent=2) + "\n", encoding="utf-8")
+    atomic_write_text(path, json.dumps(config, indent=2) + "\n")
 
 
 def run_fidelity(
@@ -446,16 +455,16 @@ def _suite_summary(
 
 
 def _write_outputs(folder: Path, summary: dict[str, Any], records: Sequence[dict[str, Any]]) -> None:
-    from executive.audit import to_json, write_summary
+    from executive.audit import atomic_replace, to_json, write_summary
     from executive.stats import reliability_diagram
 
     write_summary(folder, to_json(summary))
-    (folder / "table.md").write_text(table_markdown(summary) + "\n", encoding="utf-8")
+    atomic_write_text(folder / "table.md", table_markdown(summary) + "\n")
     executed = [r for r in records if r["outcome"] not in ("infeasible", "error")]
     if executed:
         curves = [(f"{mode} by P({key})", p, y) for mode, key, p, y in _forecasts(executed)]
         title = f"Reliability over {summary['variants_run']} variants of {summary['scenario']}"
-        reliability_diagram(curves, folder / "reliability.png", title=title)
+        atomic_replace(folder / "reliability.png", lambda tmp: reliability_diagram(curves, tmp, title=title))
 
 
 # --- tables -------------------------------------------------------------------------------------

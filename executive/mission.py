@@ -20,9 +20,13 @@ stops every thread for 27-57 ms now and then, in the middle of a motion.
 
 from __future__ import annotations
 
+import contextlib
 import gc
+import signal
+import sys
+import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -32,8 +36,8 @@ import py_trees
 
 from behaviours.guard import install_monitor
 from behaviours.robot_access import install
-from executive.approval import ApprovalChannel, PendingApproval, make_channel
-from executive.audit import AuditLog, write_summary
+from executive.approval import ApprovalChannel, ApprovalDecision, PendingApproval, make_channel
+from executive.audit import AuditLog, now_iso, write_summary
 from executive.detectors import FailureDetector
 from executive.execution import SimulatedRobot
 from executive.live_risk import LiveRiskMonitor
@@ -67,6 +71,34 @@ def freeze_startup_heap() -> int:
     return gc.get_freeze_count()
 
 
+@contextlib.contextmanager
+def _sigint_deferred() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT) off while the run's last records are written.
+
+    A second Ctrl-C during :meth:`Executive.stop` would otherwise cut the ``end`` line or
+    ``summary.json``; it is noted on stderr and otherwise ignored (the run is ending
+    anyway). Only the main thread can set signal handlers; elsewhere this does nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def note(signum: int, frame: object) -> None:
+        sys.stderr.write(
+            "\n(Ctrl-C again: the run is already stopping; its log and summary are being written)\n"
+        )
+
+    try:
+        previous = signal.signal(signal.SIGINT, note)
+    except ValueError:  # no signals here (an embedded interpreter)
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
 def _load(scenario: Scenario | str | Path) -> Scenario:
     if isinstance(scenario, Scenario):
         return scenario
@@ -87,7 +119,8 @@ class Executive:
         truth: ``"exact"`` (truth = estimate) or a seed for the sampled truth (default
             ``trials.seed``); only without ``robot``.
         out: run folder for ``decisions.jsonl``/``summary.json``/plots; None keeps the log in
-            memory only.
+            memory only. A folder another run has used is refused
+            (:class:`executive.audit.RunFolderError`) unless ``resume``.
         control_dt: control period (s) of a tick.
         guard: live risk guards around every motion.
         background: plan in a worker thread (False: inside the tick, blocking).
@@ -107,8 +140,28 @@ class Executive:
         guard: bool = True,
         background: bool = True,
         pace_waiting: bool = True,
+        resume: bool = False,
     ) -> None:
         self.scenario = _load(scenario)
+        self.folder = Path(out) if out is not None else None
+        # Claim the run folder first: a second run on it is refused before anything is built.
+        self.log = AuditLog(self.folder, resume=resume)
+        try:
+            self._build(approval, robot, truth, control_dt, guard, background, pace_waiting)
+        except BaseException:
+            self.log.abandon()  # nothing was decided: the folder is free again
+            raise
+
+    def _build(
+        self,
+        approval: ApprovalChannel | str | None,
+        robot: Any,
+        truth: str | int | None,
+        control_dt: float,
+        guard: bool,
+        background: bool,
+        pace_waiting: bool,
+    ) -> None:
         sc = self.scenario
         if isinstance(approval, str) or approval is None:
             mode = approval or sc.approval.mode
@@ -131,8 +184,6 @@ class Executive:
             self.truth_label = "the host's robot"
             self.owns_physics = False
         self.robot = robot
-        self.folder = Path(out) if out is not None else None
-        self.log = AuditLog(self.folder)
         # Every decision is checked in physics (dry runs, rollouts) in warm worker processes.
         self.physics = PhysicsCheck(sc.risk.rollouts.jobs)
         self.selectors = [
@@ -269,13 +320,34 @@ class Executive:
         return self.summary()
 
     def stop(self, reason: str) -> None:
-        """Halt the tree, hold the robot, answer nothing more, close the log (outcome aborted)."""
+        """Halt the tree, hold the robot, answer nothing more, close the log (outcome aborted).
+
+        A request still waiting for approval is answered ``abort`` first, and that answer is
+        logged before the ``stop`` line: by ``operator:interrupt`` when called while a
+        ``KeyboardInterrupt`` is being handled (Ctrl-C), else by ``halt``. A second Ctrl-C
+        meanwhile is held off until the summary and the ``end`` line are written.
+        """
         if self.done:
             return
-        self.tree.interrupt()
-        self.robot.hold()
-        self.log.record("stop", reason=reason, time=self.robot.time)
-        self._finish("aborted", reason=reason)
+        interrupted = isinstance(sys.exc_info()[1], KeyboardInterrupt)
+        with _sigint_deferred():
+            self._answer_pending("operator:interrupt" if interrupted else "halt", reason)
+            self.tree.interrupt()
+            self.robot.hold()
+            self.log.record("stop", reason=reason, time=self.robot.time)
+            self._finish("aborted", reason=reason)
+
+    def _answer_pending(self, by: str, reason: str) -> None:
+        """Log the answer of every request awaiting approval (abort now, or one given not yet acted on)."""
+        for selector in self.selectors:
+            pending = selector.pending
+            if selector.phase != "awaiting_approval" or pending is None:
+                continue
+            pending.answer(ApprovalDecision("abort", None, by=by, at=now_iso(), note=reason))
+            decision = pending.decision
+            if decision is not None and selector.approval is not decision:
+                selector.approval = decision
+                self.log.record("approval", task=selector.name, **decision.as_dict())
 
     def close(self) -> None:
         for selector in self.selectors:
@@ -287,17 +359,27 @@ class Executive:
     # --- report ---------------------------------------------------------------------------
 
     def _finish(self, outcome: str, reason: str = "") -> None:
-        self.outcome = outcome
-        self.wall_s = time.perf_counter() - self.started_wall
-        summary = self.summary()
-        if reason:
-            summary["reason"] = reason
-        self._summary = summary
-        self.log.record("end", outcome=outcome, time=self.robot.time, ticks=self.ticks, wall_s=self.wall_s)
-        if self.folder is not None:
-            self._plots()
-            write_summary(self.folder, summary)
-        self.close()
+        """Write ``summary.json`` (atomically), then the ``end`` line, then the plots; close.
+
+        The summary comes first, so a run killed just after its ``end`` line has it whole.
+        """
+        with _sigint_deferred():
+            self.outcome = outcome
+            self.wall_s = time.perf_counter() - self.started_wall
+            summary = self.summary()
+            if reason:
+                summary["reason"] = reason
+            self._summary = summary
+            if self.folder is not None:
+                write_summary(self.folder, summary)
+            self.log.record(
+                "end", outcome=outcome, time=self.robot.time, ticks=self.ticks, wall_s=self.wall_s
+            )
+            try:
+                if self.folder is not None:
+                    self._plots()
+            finally:
+                self.close()
 
     def _plots(self) -> None:
         """The pictures of ``executive plan --plot``, for the alternatives each task last ranked."""
@@ -335,6 +417,7 @@ class Executive:
         placement = self._placement()
         return {
             "scenario": self.scenario.name,
+            "run_id": self.log.run_id,
             "outcome": self.outcome,
             "truth": self.truth_label,
             "approval_channel": self.channel.name,
@@ -350,14 +433,19 @@ class Executive:
         }
 
     def _placement(self) -> list[dict[str, Any]]:
-        """Where each task's object is now (in the truth world, when the executive owns it)."""
+        """Where each task's object is now (in the truth world, when the executive owns it).
+
+        ``executed`` is False for a task that never started an alternative (planning failed,
+        the approval was refused): its object was not moved and its ``error_m`` is None.
+        """
         if self.truth is None:
             return []
         out = []
-        for task in self.scenario.mission:
+        for task, selector in zip(self.scenario.mission, self.selectors, strict=True):
             pos, _ = self.truth.object_pose(task.object)
-            err = float(np.hypot(pos[0] - task.to[0], pos[1] - task.to[1]))
-            out.append({"object": task.object, "position": pos, "error_m": err})
+            executed = bool(selector.tried)
+            err = float(np.hypot(pos[0] - task.to[0], pos[1] - task.to[1])) if executed else None
+            out.append({"object": task.object, "position": pos, "executed": executed, "error_m": err})
         return out
 
     def __enter__(self) -> Executive:

@@ -5,7 +5,10 @@ been planned, the selection, approvals, failures, outcomes). Between them, on a
 terminal, one status line is redrawn in place (robot time, task, phase, the
 running behaviour); without a terminal a line is printed whenever the running
 behaviour changes. Nothing is drawn while an approval prompt waits for the
-operator.
+operator: the status line (``\r\x1b[2K`` + text) would erase the prompt line the
+operator types on; with a terminal prompt the display prints what precedes the
+request (the risk table, the selection) and then lets the prompt draw
+(:meth:`executive.approval.TerminalChannel.screen_free`).
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ from __future__ import annotations
 import time
 from typing import IO, Any
 
+from executive.approval import TerminalChannel
 from executive.mission import Executive
 from executive.report import risk_table
 
@@ -57,6 +61,8 @@ class MissionDisplay:
         self._last_draw = 0.0
         self._last_line = ""
         self._drawn = False
+        if isinstance(executive.channel, TerminalChannel):
+            executive.channel.wait_for_display = True
 
     def start(self) -> None:
         ex = self.executive
@@ -111,7 +117,12 @@ class MissionDisplay:
     def update(self) -> None:
         self._events()
         ex = self.executive
-        if ex.done or ex.pending_approval is not None:
+        pending = ex.pending_approval
+        if pending is not None:  # the prompt owns the terminal until it is answered
+            if isinstance(ex.channel, TerminalChannel):
+                ex.channel.screen_free(pending)
+            return
+        if ex.done:
             return
         line = f"t={ex.robot.time:6.2f} s  {ex.describe()}"
         if self.tty:
@@ -135,7 +146,10 @@ class MissionDisplay:
         self._print("")
         self._print(final_table(summary))
         for placed in summary.get("placement", []):
-            self._print(f"{placed['object']} rests {placed['error_m'] * 1000:.1f} mm from its target")
+            if placed.get("error_m") is None:  # nothing was executed: the object was not moved
+                self._print(f"{placed['object']} not moved: no alternative was executed")
+            else:
+                self._print(f"{placed['object']} rests {placed['error_m'] * 1000:.1f} mm from its target")
         wall = summary.get("wall_s") or 0.0
         self._print(
             f"outcome   {summary['outcome']}; {summary['sim_time_s']:.1f} s simulated in {wall:.1f} s wall, "

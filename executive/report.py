@@ -29,17 +29,46 @@ def chosen_index(alternatives: Sequence[AlternativeRisk], ordering: str) -> int 
     return min(feasible)[1] if feasible else None
 
 
+_POLICY_TEXT = {
+    "deny": "the deny policy will refuse it",
+    "auto": "the auto policy will approve it",
+    "prompt": "an operator must approve it",
+}
+
+
+def _mark(scenario: Scenario, alternatives: Sequence[AlternativeRisk], chosen: int | None) -> tuple[str, str]:
+    """The chosen row's mark and the legend: ``*`` within the threshold; ``!`` above it (needs approval)."""
+    threshold = scenario.risk.threshold
+    if chosen is None:
+        return "*", "* chosen"
+    risk = alternatives[chosen].risk
+    assert risk is not None
+    value = risk.value(scenario.risk.ordering)
+    if value <= threshold:
+        return "*", "* chosen"
+    policy = _POLICY_TEXT.get(scenario.approval.mode, f"approval.mode {scenario.approval.mode}")
+    return "!", (
+        f"! lowest {scenario.risk.ordering} ({value:.4g}) but above the threshold {threshold:g}: "
+        f"needs approval (approval.mode {scenario.approval.mode}: {policy})"
+    )
+
+
 def risk_table(scenario: Scenario, task_label: str, alternatives: Sequence[AlternativeRisk]) -> str:
-    """A terminal table in the shape of the seed study's Table 1, the chosen alternative marked."""
+    """A terminal table in the shape of the seed study's Table 1, the chosen alternative marked.
+
+    ``*`` marks the alternative that would run; when even the lowest is above the
+    threshold it is marked ``!`` instead, with a note: it runs only if approved.
+    """
     ordering = scenario.risk.ordering
     chosen = chosen_index(alternatives, ordering)
+    chosen_mark, legend = _mark(scenario, alternatives, chosen)
     head = (
         f"{'':2}{'alternative':<15}{'collision':>10}{'fall':>10}{'grasp':>10}{'P(any)':>10}"
         f"{'seed sum':>10}{'exp. loss':>10}{'min dist':>10}{'min CoM':>9}"
     )
     lines = [f"task {task_label} (ranked by {ordering}; threshold {scenario.risk.threshold})", head]
     for i, alt in enumerate(alternatives):
-        mark = "*" if i == chosen else " "
+        mark = chosen_mark if i == chosen else " "
         if alt.risk is None:
             lines.append(f"{mark} {alt.name:<15}infeasible: {alt.error}")
             continue
@@ -55,7 +84,7 @@ def risk_table(scenario: Scenario, task_label: str, alternatives: Sequence[Alter
         )
         if alt.physics is not None:
             lines.append(f"  {'':<15}{physics_text(alt.physics)}{_fused_text(alt.physics)}")
-    lines.append("collision/fall/grasp/P(any): probabilities; seed sum: the seed's weighted sum; * chosen")
+    lines.append(f"collision/fall/grasp/P(any): probabilities; seed sum: the seed's weighted sum; {legend}")
     return "\n".join(lines)
 
 

@@ -381,6 +381,8 @@ class RiskSelector(py_trees.composites.Composite):
         if decision.decision == "replan":
             self._start_planning()
             return Status.RUNNING
+        if decision.decision == "deny":  # the risk is refused: the task ends as an abort does
+            return self._finish("aborted", {"mode": "denied", "detail": f"denied by {decision.by}"})
         return self._finish("aborted", {"mode": "aborted", "detail": f"aborted by {decision.by}"})
 
     def _ranked(self, results: Sequence[AlternativeRisk]) -> list[AlternativeRisk]:

@@ -43,7 +43,7 @@ def test_policies() -> None:
     PolicyChannel("deny").submit(deny)
     assert auto.decision is not None and auto.decision.decision == "approve"
     assert auto.decision.alternative == "left_to_right" and auto.decision.by == "policy:auto"
-    assert deny.decision is not None and deny.decision.decision == "abort"
+    assert deny.decision is not None and deny.decision.decision == "deny"  # a deny, not an abort
     assert deny.decision.by == "policy:deny"
     with pytest.raises(ValueError, match="auto or deny"):
         PolicyChannel("maybe")

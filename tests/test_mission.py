@@ -104,7 +104,8 @@ def test_deny_above_threshold_aborts_without_moving_the_arms(tmp_path: Path) -> 
     print(f"deny: {summary['outcome']}; arm joints moved at most {np.degrees(moved):.3f} deg")
     assert summary["outcome"] == "aborted"
     (task,) = summary["tasks"]
-    assert task["approval"]["decision"] == "abort" and task["approval"]["by"] == "policy:deny"
+    assert task["approval"]["decision"] == "deny" and task["approval"]["by"] == "policy:deny"
+    assert task["outcome"] == "aborted" and task["failure"]["mode"] == "denied"
     assert task["chosen"] is None
     assert moved < np.radians(0.5)
     kinds = [e["kind"] for e in _lines(tmp_path / "run")]
