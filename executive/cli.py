@@ -350,7 +350,8 @@ def _whole_number(low: int, high: int, what: str, high_text: str = "") -> Callab
         except ValueError:
             raise argparse.ArgumentTypeError(f"expected a whole number {valid}, got {text!r}") from None
         if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"must be {valid}, got {value}")
+            bound = f"at least {low}" if value < low else f"at most {high_text or high}"
+            raise argparse.ArgumentTypeError(f"must be {bound}, got {value}; valid: {valid}")
         return value
 
     parse.__name__ = what
@@ -362,7 +363,6 @@ _PIXELS = _whole_number(1, 16384, "pixels")
 _ROLLOUTS = _whole_number(0, 10_000, "rollouts per alternative; 0: off")
 _TRIALS = _whole_number(1, 1_000_000, "trials")
 _JOBS = _whole_number(1, 1024, "worker processes")
-_VARIANTS = _whole_number(1, 10_000, "scene variants")
 _TASK = _whole_number(0, 10_000, "a task index, 0 for the first")
 
 
@@ -455,10 +455,8 @@ def _parser() -> argparse.ArgumentParser:
         "ranking hold (predicted vs observed, regret of the per-trial choice)?",
     )
     p.add_argument("scenario", help=scenario_help)
-    p.add_argument("--variants", type=_VARIANTS, default=10, help="number of scene variants K (default 10)")
-    p.add_argument(
-        "--trials", type=_TRIALS, default=10, help="trials per alternative and variant (default 10)"
-    )
+    p.add_argument("--variants", type=int, default=10, help="number of scene variants K (default 10)")
+    p.add_argument("--trials", type=int, default=10, help="trials per alternative and variant (default 10)")
     p.add_argument("--jobs", type=_JOBS, default=1, help="parallel worker processes per campaign (default 1)")
     p.add_argument("--out", metavar="DIR", help="suite folder (default runs/<timestamp>-<scenario>-fidelity)")
     p.add_argument("--seed", type=_SEED, default=None, help="seed of the variants (default: trials.seed)")

@@ -27,7 +27,7 @@ class OutputPathError(ExecutiveError):
 
     def __init__(self, option: str, path: str | Path, problem: str) -> None:
         self.option, self.path, self.problem = option, str(path), problem
-        super().__init__(f"{option} {path!s}: {problem}")
+        super().__init__(f"{option} {path!s}: cannot write there: {problem}")
 
 
 def _reason(exc: OSError) -> str:
@@ -49,12 +49,12 @@ def _existing_ancestor(option: str, path: Path, start: Path) -> Path:
                     option, path, f"{current} is a broken symbolic link (or a loop of them)"
                 )
         except OSError as exc:  # a symlink loop, a name too long, ...
-            raise OutputPathError(option, path, _reason(exc)) from None
+            raise OutputPathError(option, path, f"{current}: {_reason(exc)}") from None
         if current.parent == current:
             break
         current = current.parent
     if not current.is_dir():
-        what = "is" if current == path else f"is inside {current}, which is"
+        what = "it is" if current == path else f"it is inside {current}, which is"
         raise OutputPathError(option, path, f"{what} a file, not a folder")
     return current
 
@@ -64,7 +64,7 @@ def _probe(option: str, path: Path, folder: Path) -> None:
     try:
         fd, name = tempfile.mkstemp(prefix=".executive-probe-", dir=folder)
     except OSError as exc:
-        raise OutputPathError(option, path, f"{_reason(exc)}: cannot create a file in {folder}") from None
+        raise OutputPathError(option, path, f"the folder {folder} is {_reason(exc)}") from None
     os.close(fd)
     os.unlink(name)
 
@@ -72,9 +72,9 @@ def _probe(option: str, path: Path, folder: Path) -> None:
 def _as_path(option: str, path: str | Path) -> Path:
     text = os.fspath(path)
     if not text:
-        raise OutputPathError(option, "''", "an empty path")
+        raise OutputPathError(option, "''", "the path is empty")
     if "\0" in text:
-        raise OutputPathError(option, repr(text), "contains a NUL byte")
+        raise OutputPathError(option, repr(text), "the path contains a NUL byte")
     return Path(text)  # as the writer will open it: a quoted "~" is a folder named "~"
 
 
@@ -104,14 +104,14 @@ def check_file(path: str | Path, option: str) -> Path:
     except OSError as exc:
         raise OutputPathError(option, file, _reason(exc)) from None
     if is_dir:
-        raise OutputPathError(option, file, "is a folder; give a file name")
+        raise OutputPathError(option, file, "it is a folder; give a file name")
     existing = _existing_ancestor(option, file, file.parent)
     if existing == file.parent and file.exists():
         try:
             with open(file, "ab"):
                 pass
         except OSError as exc:
-            raise OutputPathError(option, file, _reason(exc)) from None
+            raise OutputPathError(option, file, f"the file is {_reason(exc)}") from None
     else:
         _probe(option, file, existing)
     return file
