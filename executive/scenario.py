@@ -6,6 +6,13 @@
 ``<file>: <key.path>: expected X, got Y``; unknown keys are rejected with the
 nearest valid name. Angles are degrees in the file and radians in the result.
 Relative paths (a robot's MJCF or profile) resolve against the scenario's folder.
+
+Beyond types, every number must lie in its range (:mod:`executive.scenario_ranges`), no
+setting may switch a safety check off (a negative ``risk.guard.min_com_margin``, a
+``risk.threshold`` at or above the largest value its ordering can take:
+:func:`max_ordering_value`), ``severity.body_parts`` names a body-part label or a body of the
+robot's model, and the scene must be physically possible (:mod:`executive.scene_checks`,
+with the robot's reach measured in its MJCF by :mod:`executive.robot_model`).
 The schema by example is the bundled ``scenarios/book_transfer.yaml``.
 """
 
@@ -51,7 +58,7 @@ from executive.validation import (
     unknown_name,
 )
 
-__all__ = ["APPROVAL_MODES", "ORDERINGS", "TASK_KINDS", "from_dict", "load", "loads"]
+__all__ = ["APPROVAL_MODES", "ORDERINGS", "TASK_KINDS", "from_dict", "load", "loads", "max_ordering_value"]
 
 #: Task kinds a mission may hold.
 TASK_KINDS: tuple[str, ...] = ("transfer",)

@@ -126,7 +126,7 @@ def _check_duplicate_keys(root: yaml.Node) -> None:
                 key = str(key_node.value) if isinstance(key_node, yaml.ScalarNode) else f"<{key_node.id}>"
                 where = f"{path}.{key}" if path else key
                 if key in first and key != "<<":
-                    raise _DuplicateKeyError(where, first[key].start_mark.line + 1, key_node.start_mark)
+                    raise _DuplicateKeyError(where, key, first[key].start_mark.line + 1, key_node.start_mark)
                 first[key] = key_node
                 stack.append((value_node, where))
 
@@ -134,9 +134,9 @@ def _check_duplicate_keys(root: yaml.Node) -> None:
 class _DuplicateKeyError(yaml.MarkedYAMLError):
     """A key given twice in one mapping: names the key path and both lines."""
 
-    def __init__(self, key_path: str, first_line: int, mark: yaml.Mark) -> None:
+    def __init__(self, key_path: str, key: str, first_line: int, mark: yaml.Mark) -> None:
         super().__init__(
-            problem=f"duplicate key '{key_path}' (first at line {first_line}, again at line "
+            problem=f"duplicate key '{key}' (first at line {first_line}, again at line "
             f"{mark.line + 1}); YAML would silently keep the last one: give it once",
             problem_mark=mark,
         )
