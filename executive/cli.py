@@ -121,8 +121,10 @@ def _check_out(args: argparse.Namespace) -> None:
 
 def _check_run_paths(args: argparse.Namespace) -> None:
     """``run``'s output paths, before anything is planned: ``--out`` a writable folder, ``--video``
-    a writable ``.gif`` file (else an ExecutiveError, exit 2)."""
-    _check_out(args)
+    a writable ``.gif`` file (else an ExecutiveError, exit 2). ``--alternative`` writes no run
+    folder: the default one is not checked then."""
+    if args.out or args.alternative is None:
+        _check_out(args)
     if args.video:
         if Path(args.video).suffix.lower() != ".gif":
             raise ExecutiveError(

@@ -135,6 +135,14 @@ def test_the_default_run_folder_read_only(
     _bad(["run", "book_transfer"], capsys, "default run folder", "runs", "not writable")
 
 
+def test_one_alternative_writes_no_run_folder_so_the_default_is_not_checked(
+    read_only: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    monkeypatch.chdir(read_only)  # the check passed: the next one, the alternative's name, speaks
+    err = _bad(["run", "book_transfer", "--alternative", "juggle"], capsys, "no alternative 'juggle'")
+    assert "run folder" not in err
+
+
 FILE_OPTIONS = [["show", "book_transfer", "--png", "x.png"], ["run", "book_transfer", "--video", "v.gif"]]
 
 
