@@ -830,6 +830,33 @@ def unique_trials(
     return kept, duplicates, beyond
 
 
+class FolderLock:
+    """An exclusive ``flock`` on ``<folder>/.campaign.lock`` while a campaign runs there.
+
+    A second campaign on the same folder (two ``--resume`` at once, say) is refused instead
+    of interleaving its trials. The kernel drops the lock when the process ends, however it
+    ends (a kill -9 leaves no stale lock). Release with :meth:`release` (or let it be collected).
+    """
+
+    def __init__(self, folder: Path) -> None:
+        import fcntl
+
+        self._file: IO[bytes] | None = (folder / ".campaign.lock").open("ab")
+        try:
+            fcntl.flock(self._file.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            self.release()
+            raise ExecutiveError(
+                f"--out {folder}: another campaign is running in this folder; wait for it to end "
+                "(then --resume completes it if it was cut), or choose another --out"
+            ) from None
+
+    def release(self) -> None:
+        if self._file is not None:
+            self._file.close()
+            self._file = None
+
+
 def _write_config(folder: Path, config: dict[str, Any]) -> None:
     from executive.audit import atomic_write_text
 
@@ -895,6 +922,7 @@ def run_campaign(
             "or choose another --out"
         )
     folder.mkdir(parents=True, exist_ok=True)
+    lock = FolderLock(folder)  # held until the summary is written
     _write_config(folder, config)
 
     records, duplicates, beyond = unique_trials(read_trials(trials_path, repair=True), n, names)
@@ -981,4 +1009,5 @@ def run_campaign(
     atomic_write_text(folder / "table.md", table_markdown(summary) + "\n")
     if records:
         _reliability(records, folder / "reliability.png")
+    lock.release()
     return CampaignResult(folder, summary, records, new, elapsed, interrupted)

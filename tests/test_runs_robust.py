@@ -404,3 +404,34 @@ def test_campaign_resume_counts_a_duplicated_record_once(
     assert main([*args, "--resume"]) == 2
     err = capsys.readouterr().err
     assert "campaign.json cannot be read as JSON" in err and "Traceback" not in err
+
+
+def test_a_second_campaign_on_a_running_campaigns_folder_is_refused(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from executive.campaign import FolderLock
+
+    scenario = _scenario(tmp_path, alternatives=("left",))
+    out = tmp_path / "campaign"
+    out.mkdir()
+    lock = FolderLock(out)  # as a campaign running there holds it
+    try:
+        assert main(["campaign", str(scenario), "--trials", "1", "--out", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert f"--out {out}: another campaign is running in this folder" in err and "Traceback" not in err
+        assert not (out / "trials.jsonl").exists() or (out / "trials.jsonl").read_text() == ""
+    finally:
+        lock.release()
+    FolderLock(out).release()  # free again once released
+
+
+def test_a_cut_suite_json_gives_exit_2(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    scenario = _scenario(tmp_path, alternatives=("left",))
+    out = tmp_path / "suite"
+    out.mkdir()
+    (out / "suite.json").write_text('{"scenario": "book_tr')
+    code = main(
+        ["fidelity", str(scenario), "--variants", "1", "--trials", "1", "--out", str(out), "--resume"]
+    )
+    err = capsys.readouterr().err
+    assert code == 2 and "suite.json cannot be read as JSON" in err and "Traceback" not in err
