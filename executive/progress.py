@@ -97,7 +97,8 @@ class MissionDisplay:
             return f"{e['task']}: {what} {', '.join(e['alternatives'])} on the estimate"
         if kind == "selection":
             selector = next(s for s in self.executive.selectors if s.name == e["task"])
-            table = risk_table(self.executive.scenario, selector.name, selector.results)
+            ex = self.executive
+            table = risk_table(ex.scenario, selector.name, selector.results, approval=ex.channel.name)
             return f"{table}\n{e['task']}: {e['reason']}"
         if kind == "approval_request":
             return f"{e['task']}: approval requested from {e['channel']}"

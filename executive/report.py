@@ -36,7 +36,9 @@ _POLICY_TEXT = {
 }
 
 
-def _mark(scenario: Scenario, alternatives: Sequence[AlternativeRisk], chosen: int | None) -> tuple[str, str]:
+def _mark(
+    scenario: Scenario, alternatives: Sequence[AlternativeRisk], chosen: int | None, approval: str | None
+) -> tuple[str, str]:
     """The chosen row's mark and the legend: ``*`` within the threshold; ``!`` above it (needs approval)."""
     threshold = scenario.risk.threshold
     if chosen is None:
@@ -46,22 +48,30 @@ def _mark(scenario: Scenario, alternatives: Sequence[AlternativeRisk], chosen: i
     value = risk.value(scenario.risk.ordering)
     if value <= threshold:
         return "*", "* chosen"
-    policy = _POLICY_TEXT.get(scenario.approval.mode, f"approval.mode {scenario.approval.mode}")
+    mode = approval or scenario.approval.mode
+    policy = _POLICY_TEXT.get(mode.removeprefix("policy:"), f"{mode} must approve it")
     return "!", (
         f"! lowest {scenario.risk.ordering} ({value:.4g}) but above the threshold {threshold:g}: "
-        f"needs approval (approval.mode {scenario.approval.mode}: {policy})"
+        f"needs approval (approval {mode}: {policy})"
     )
 
 
-def risk_table(scenario: Scenario, task_label: str, alternatives: Sequence[AlternativeRisk]) -> str:
+def risk_table(
+    scenario: Scenario,
+    task_label: str,
+    alternatives: Sequence[AlternativeRisk],
+    approval: str | None = None,
+) -> str:
     """A terminal table in the shape of the seed study's Table 1, the chosen alternative marked.
 
     ``*`` marks the alternative that would run; when even the lowest is above the
-    threshold it is marked ``!`` instead, with a note: it runs only if approved.
+    threshold it is marked ``!`` instead, with a note saying who must approve it:
+    ``approval`` (a mode or a channel's name, e.g. ``policy:deny``, ``prompt``) or, by
+    default, the scenario's ``approval.mode``.
     """
     ordering = scenario.risk.ordering
     chosen = chosen_index(alternatives, ordering)
-    chosen_mark, legend = _mark(scenario, alternatives, chosen)
+    chosen_mark, legend = _mark(scenario, alternatives, chosen, approval)
     head = (
         f"{'':2}{'alternative':<15}{'collision':>10}{'fall':>10}{'grasp':>10}{'P(any)':>10}"
         f"{'seed sum':>10}{'exp. loss':>10}{'min dist':>10}{'min CoM':>9}"

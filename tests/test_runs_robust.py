@@ -181,7 +181,8 @@ def test_prompt_stays_on_screen_counts_down_and_logs_garbage_replan_deny(tmp_pat
         assert "60 s left to answer (then abort)" in term.screen  # the countdown, above the prompt
         term.expect("58 s left to answer", timeout=10)  # redrawn live while it waits
         _not_erased(_after_prompt(term.screen))
-        assert "! lowest expected_loss" in term.screen and "needs approval" in term.screen
+        assert "! lowest expected_loss" in term.screen
+        assert "needs approval (approval prompt: an operator must approve it)" in term.screen
         assert not re.search(r"^\* [a-z_]+ ", term.screen, re.MULTILINE)  # no row marked as if it would run
         term.type("what\n")
         term.expect("not understood: 'what'", timeout=10)
