@@ -37,8 +37,10 @@ import dataclasses
 import hashlib
 import json
 import math
+import multiprocessing
 import os
 import pickle
+import signal
 import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
@@ -394,6 +396,8 @@ _WORKER: dict[str, Any] = {}
 
 def _init_worker(scenario: Scenario, task_index: int) -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
+    if multiprocessing.parent_process() is not None:  # a pool worker: Ctrl-C is the campaign's to handle
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
     _WORKER.clear()
     _WORKER.update(scenario=scenario, task_index=task_index, predictions={}, path=None)
 

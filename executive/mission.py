@@ -99,28 +99,6 @@ def _sigint_deferred() -> Iterator[None]:
         signal.signal(signal.SIGINT, previous)
 
 
-def _start_workers_deaf_to_ctrl_c(physics: PhysicsCheck) -> None:
-    """Start the physics worker processes with SIGINT ignored (they inherit it through exec).
-
-    Ctrl-C on a terminal reaches its whole foreground process group: without this each worker
-    would die printing a KeyboardInterrupt traceback under the run's clean stop. The run
-    itself (the main process) handles Ctrl-C and shuts the workers down. From another thread
-    than the main one the workers are started as they are.
-    """
-    if threading.current_thread() is not threading.main_thread():
-        physics.pool.warm()
-        return
-    try:
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    except ValueError:
-        physics.pool.warm()
-        return
-    try:
-        physics.pool.warm()
-    finally:
-        signal.signal(signal.SIGINT, previous)
-
-
 def _load(scenario: Scenario | str | Path) -> Scenario:
     if isinstance(scenario, Scenario):
         return scenario
@@ -208,7 +186,7 @@ class Executive:
         self.robot = robot
         # Every decision is checked in physics (dry runs, rollouts) in warm worker processes.
         self.physics = PhysicsCheck(sc.risk.rollouts.jobs)
-        _start_workers_deaf_to_ctrl_c(self.physics)
+        self.physics.pool.warm()  # the workers start while the world and the tree are built
         self.selectors = [
             RiskSelector(
                 f"task{i}",

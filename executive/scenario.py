@@ -384,9 +384,9 @@ def _rollouts(node: Node) -> RolloutConfig:
         },
     )
     if config.count and config.min_count > config.count:
-        node.get("min_count" if node.has("min_count") else "count").fail(
-            f"min_count ({config.min_count}) is more than count ({config.count})"
-        )
+        if not node.has("min_count"):  # the default minimum never exceeds the count given
+            return dataclasses.replace(config, min_count=config.count)
+        node.get("min_count").fail(f"min_count ({config.min_count}) is more than count ({config.count})")
     return config
 
 

@@ -20,6 +20,7 @@ import concurrent.futures.process
 import dataclasses
 import multiprocessing
 import os
+import signal
 import time
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
@@ -337,6 +338,9 @@ def _choice(
 
 def _init_worker() -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
+    # Ctrl-C on a terminal reaches the whole foreground process group: the process that owns
+    # the pool handles it and shuts the workers down; a worker must not die printing a traceback.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _warm_up() -> None:
