@@ -118,6 +118,8 @@ def risk_json(scenario: Scenario, tasks: Sequence[tuple[str, Sequence[Alternativ
         rows = []
         for i, alt in enumerate(alternatives):
             row: dict[str, Any] = {"name": alt.name, "feasible": alt.feasible, "chosen": i == chosen}
+            if i == chosen and alt.risk is not None:  # above the threshold it runs only once approved
+                row["needs_approval"] = alt.risk.value(scenario.risk.ordering) > scenario.risk.threshold
             if alt.physics is not None:
                 row["physics"] = alt.physics
             if alt.risk is None:

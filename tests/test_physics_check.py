@@ -103,6 +103,9 @@ def test_plan_cli_shows_the_dry_runs(capsys: pytest.CaptureFixture[str]) -> None
     out = json.loads(capsys.readouterr().out)
     rows = out["tasks"][0]["alternatives"]
     assert all(r["physics"]["dry_run"]["outcome"] == "success" for r in rows)
+    chosen = next(r for r in rows if r["chosen"])
+    threshold = load("book_transfer").risk.threshold
+    assert chosen["needs_approval"] == (chosen["risk"]["expected_loss"] > threshold)
     default = load("book_transfer").risk.rollouts.count
     assert all(r["physics"]["rollouts"] == default for r in rows)
 
