@@ -8,6 +8,7 @@ paragraph on stderr, never a traceback.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -479,6 +480,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ExecutiveError as exc:
         print(f"executive {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:  # the reader went away (``| head``): nothing more to say to it
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return EXIT_OK
     except OSError as exc:  # a path the checks could not foresee (a disk filled, a folder removed)
         print(f"executive {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

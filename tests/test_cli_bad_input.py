@@ -292,3 +292,18 @@ def test_a_video_that_cannot_be_saved_after_the_run_keeps_the_outcome(
     assert "the video was not saved" in err and str(read_only / "run.gif") in err
     assert "Traceback" not in err
     assert list(read_only.iterdir()) == []
+
+
+def test_a_reader_that_goes_away_is_not_an_error() -> None:
+    """``executive validate ... | head -1``: the broken pipe ends the command quietly, exit 0."""
+    import subprocess
+    import sys
+
+    cmd = [sys.executable, "-m", "executive.cli", "validate", "book_transfer"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    assert proc.stdout is not None
+    proc.stdout.readline()
+    proc.stdout.close()  # the reader leaves after one line
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 0, err
+    assert b"Traceback" not in err and b"error" not in err
