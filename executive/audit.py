@@ -32,7 +32,7 @@ import os
 import re
 import tempfile
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -48,6 +48,7 @@ __all__ = [
     "atomic_write_text",
     "claim_folder",
     "now_iso",
+    "read_resume_settings",
     "run_folder",
     "to_json",
     "write_summary",
@@ -113,6 +114,44 @@ def atomic_replace(path: Path | str, write: Callable[[Path], object]) -> Path:
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+def read_resume_settings(
+    folder: Path, name: str, config: dict[str, Any], keys: Sequence[str], what: str, how: str
+) -> None:
+    """Check that the settings file ``folder/name`` (JSON) is the one ``config`` asks to resume.
+
+    Args:
+        folder: the campaign's or suite's folder.
+        name: its settings file (``campaign.json``, ``suite.json``).
+        config: the settings of this run.
+        keys: the settings that must match.
+        what: what the folder holds, for messages ("a campaign", "a fidelity suite").
+        how: what to resume with, for messages ("the same scenario, seed, task and alternatives").
+
+    Raises:
+        ExecutiveError: the file is missing, cut, not a JSON object, or made with other settings.
+    """
+    from executive.errors import ExecutiveError
+
+    path = folder / name
+    if not path.is_file():
+        raise ExecutiveError(f"--resume: {folder} holds no {name} (is it {what}'s folder?)")
+    try:
+        old = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError) as exc:
+        raise ExecutiveError(
+            f"--resume: {path} cannot be read as JSON ({exc}); it was cut or edited: "
+            "start anew with another --out"
+        ) from None
+    if not isinstance(old, dict):
+        raise ExecutiveError(f"--resume: {path} is not {what}'s settings (a JSON object expected)")
+    for key in keys:
+        if old.get(key) != config[key]:
+            raise ExecutiveError(
+                f"--resume: {what} in {folder} was made with {key} = {old.get(key)!r}; this run asks "
+                f"for {config[key]!r}. Resume with {how}, or start anew with another --out"
+            )
 
 
 def run_folder(scenario_name: str, base: Path | str = "runs") -> Path:

@@ -786,25 +786,11 @@ def _fingerprint(scenario: Scenario) -> str:
 
 def _check_resume(folder: Path, config: dict[str, Any]) -> None:
     """The campaign in ``folder`` is the one ``config`` asks for (else an ExecutiveError naming the key)."""
-    path = folder / "campaign.json"
-    if not path.is_file():
-        raise ExecutiveError(f"--resume: {folder} holds no campaign.json (is it a campaign's run folder?)")
-    try:
-        old = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError) as exc:
-        raise ExecutiveError(
-            f"--resume: {path} cannot be read as JSON ({exc}); it was cut or edited. Its trials are "
-            "still in trials.jsonl: start a new campaign with another --out"
-        ) from None
-    if not isinstance(old, dict):
-        raise ExecutiveError(f"--resume: {path} is not a campaign's settings (a JSON object expected)")
-    for key in ("scenario", "scenario_sha256", "seed", "task", "alternatives"):
-        if old.get(key) != config[key]:
-            raise ExecutiveError(
-                f"--resume: the campaign in {folder} was made with {key} = {old.get(key)!r}; this run asks "
-                f"for {config[key]!r}. Resume with the same scenario, seed, task and alternatives, "
-                "or start a new campaign with another --out"
-            )
+    from executive.audit import read_resume_settings
+
+    keys = ("scenario", "scenario_sha256", "seed", "task", "alternatives")
+    how = "the same scenario, seed, task and alternatives"
+    read_resume_settings(folder, "campaign.json", config, keys, "a campaign", how)
 
 
 def unique_trials(

@@ -36,7 +36,7 @@ from typing import IO, TYPE_CHECKING, Any
 
 import numpy as np
 
-from executive.audit import atomic_write_text
+from executive.audit import atomic_write_text, read_resume_settings
 from executive.errors import ExecutiveError
 from executive.scenario_types import Scenario
 
@@ -89,24 +89,9 @@ def _prepare(folder: Path, config: dict[str, Any], resume: bool) -> None:
     """Write (or, with ``resume``, check) the suite's ``suite.json``."""
     path = folder / "suite.json"
     if resume:
-        if not path.is_file():
-            raise ExecutiveError(f"--resume: {folder} holds no suite.json (is it a fidelity suite's folder?)")
-        try:
-            old = json.loads(path.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise ExecutiveError(
-                f"--resume: {path} cannot be read as JSON ({exc}); it was cut or edited: "
-                "start a new suite with another --out"
-            ) from None
-        if not isinstance(old, dict):
-            raise ExecutiveError(f"--resume: {path} is not a suite's settings (a JSON object expected)")
-        for key in ("scenario", "scenario_sha256", "seed", "rollouts"):
-            if old.get(key) != config[key]:
-                raise ExecutiveError(
-                    f"--resume: the suite in {folder} was made with {key} = {old.get(key)!r}; this run asks "
-                    f"for {config[key]!r}. Resume with the same scenario, --seed and --rollouts, or start "
-                    "a new suite with another --out"
-                )
+        keys = ("scenario", "scenario_sha256", "seed", "rollouts")
+        how = "the same scenario, --seed and --rollouts"
+        read_resume_settings(folder, "suite.json", config, keys, "a fidelity suite", how)
     elif path.is_file():
         raise ExecutiveError(
             f"{folder} already holds a fidelity suite: add --resume to complete it, or choose another --out"

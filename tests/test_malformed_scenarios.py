@@ -20,6 +20,7 @@ from typing import Any
 
 import pytest
 import yaml
+from scenario_docs import walk  # tests/ is on sys.path (pytest's default prepend import mode)
 
 from executive import registry
 from executive.cli import main
@@ -38,25 +39,12 @@ class Case:
     on_text: bool = False
 
 
-def _walk(data: Doc, path: str) -> tuple[Any, str | int]:
-    parts: list[str | int] = []
-    for part in path.split("."):
-        name, *indices = part.replace("]", "").split("[")
-        if name:
-            parts.append(name)
-        parts.extend(int(i) for i in indices)
-    node: Any = data
-    for part in parts[:-1]:
-        node = node.setdefault(part, {}) if isinstance(node, dict) else node[part]
-    return node, parts[-1]
-
-
 def put(*pairs: tuple[str, object]) -> Callable[[Doc, Path], Doc]:
     """Set each dotted key path (with [i] indices) to its value."""
 
     def mutate(data: Doc, _tmp: Path) -> Doc:
         for path, value in pairs:
-            node, key = _walk(data, path)
+            node, key = walk(data, path)
             if isinstance(node, list) and key == len(node):
                 node.append(value)
             else:

@@ -12,6 +12,7 @@ from typing import Any
 
 import pytest
 import yaml
+from scenario_docs import walk  # tests/ is on sys.path (pytest's default prepend import mode)
 
 from executive import registry, scenario
 from executive.errors import ScenarioError
@@ -19,23 +20,9 @@ from executive.errors import ScenarioError
 Doc = dict[str, Any]
 
 
-def _walk(data: Doc, path: str) -> tuple[Any, str | int]:
-    """The container holding ``path`` (dotted, with [i] indices) and the last key."""
-    parts: list[str | int] = []
-    for part in path.split("."):
-        name, *indices = part.replace("]", "").split("[")
-        if name:
-            parts.append(name)
-        parts.extend(int(i) for i in indices)
-    node: Any = data
-    for part in parts[:-1]:
-        node = node[part]
-    return node, parts[-1]
-
-
 def put(path: str, value: object) -> Callable[[Doc], Doc]:
     def mutate(data: Doc) -> Doc:
-        node, key = _walk(data, path)
+        node, key = walk(data, path)
         node[key] = value
         return data
 
@@ -44,7 +31,7 @@ def put(path: str, value: object) -> Callable[[Doc], Doc]:
 
 def drop(path: str) -> Callable[[Doc], Doc]:
     def mutate(data: Doc) -> Doc:
-        node, key = _walk(data, path)
+        node, key = walk(data, path)
         del node[key]
         return data
 
@@ -53,7 +40,7 @@ def drop(path: str) -> Callable[[Doc], Doc]:
 
 def rename(path: str, new: str) -> Callable[[Doc], Doc]:
     def mutate(data: Doc) -> Doc:
-        node, key = _walk(data, path)
+        node, key = walk(data, path)
         node[new] = node.pop(key)
         return data
 
