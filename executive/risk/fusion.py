@@ -45,6 +45,8 @@ class ModePosterior:
     a: float
     b: float
     severity: float  # expected loss per unit of probability (the analytic report's)
+    failures: int = 0  # rollouts that failed in this mode
+    rollouts: int = 0  # rollouts counted for this mode (0 for a mode physics does not observe)
 
     @property
     def mean(self) -> float:
@@ -75,7 +77,7 @@ def posteriors(
             a, b = (p, 1.0 - p)
         else:
             a, b = prior_weight * p + k, prior_weight * (1.0 - p) + trials - k
-        out.append(ModePosterior(mode, a, b, report.severity))
+        out.append(ModePosterior(mode, a, b, report.severity, k, trials))
     return out
 
 
@@ -95,10 +97,12 @@ def fuse(
     reports = []
     for post in posteriors(analytic, counts, n, prior_weight):
         report = analytic.components[post.mode]
-        observed = OBSERVED_AS.get(post.mode)
-        k = sum(counts.get(o, 0) for o in observed) if observed else 0
-        details = {**report.details, "analytic": report.probability, "rollouts": n if observed else 0}
-        details["failures"] = k
+        details = {
+            **report.details,
+            "analytic": report.probability,
+            "rollouts": post.rollouts,
+            "failures": post.failures,
+        }
         reports.append(
             dataclasses.replace(
                 report,

@@ -374,7 +374,9 @@ class RolloutPool:
 
     def warm(self) -> list[concurrent.futures.Future[None]]:
         """Start the workers and have each import the physics (returns at once; the futures
-        finish when they are ready)."""
+        finish when they are ready). Workers already running are left alone (no futures)."""
+        if self._pool is not None:
+            return []
         pool = self.start()
         return [pool.submit(_warm_up) for _ in range(self.jobs)]
 
