@@ -18,8 +18,8 @@ from pathlib import Path
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 
-from executive.campaign import run_campaign
 from executive.scenario import load
+from executive.validation.campaign import run_campaign
 
 
 def main() -> None:

@@ -26,7 +26,7 @@ from raw_reference import Knot, raw_distances, record_pairs
 
 from executive.risk.collision import CollisionModel, assess_collision, monte_carlo_collision_probability
 from executive.scenario import load
-from executive.world import World, build
+from executive.world.model import World, build
 
 __all__ = ["main", "sweep"]
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import sys
 
-from executive.runner import run_alternative
+from executive.runtime.runner import run_alternative
 from executive.scenario import load
 
 

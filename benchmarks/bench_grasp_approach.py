@@ -20,12 +20,12 @@ import numpy as np
 import py_trees
 
 from behaviours.robot_access import install
-from executive.composition import AlternativePlan, build_subtree, plan_alternative
-from executive.execution import SimulatedRobot
-from executive.planning import Planner, PlanningError
+from executive.planning.planner import Planner, PlanningError
 from executive.risk.grasp import approach_envelope
+from executive.robot.simulated import SimulatedRobot
 from executive.scenario import load
-from executive.world import World, build
+from executive.tasks.steps import AlternativePlan, build_subtree, plan_alternative
+from executive.world.model import World, build
 
 
 def physics_path(plan: AlternativePlan, truth: World, side: str) -> np.ndarray:

@@ -2,8 +2,8 @@
 
 For each alternative of the heavy-box variant of ``book_transfer`` (the book replaced by a box
 of the given size and mass, same place), prints the predicted drop probability (grasp, hold
-and their union, :func:`executive.assessment.assess_plan`) and the outcome of ``count``
-truths drawn by the truth sampler and run in physics (``executive.runner.run_alternative``),
+and their union, :func:`executive.decision.assessment.assess_plan`) and the outcome of ``count``
+truths drawn by the truth sampler and run in physics (``executive.runtime.runner.run_alternative``),
 with the failures counted by kind: the receiver closing on nothing, an object lost from a hand,
 a misplaced object, anything else. Per handover trial, also the model's critical mass at the
 trial's own lateral offset and yaw error against the trial's mass.
@@ -20,15 +20,15 @@ from pathlib import Path
 
 import numpy as np
 
-from executive.assessment import assess_plan
-from executive.composition import plan_alternative
-from executive.planning import Planner
+from executive.decision.assessment import assess_plan
+from executive.planning.planner import Planner
 from executive.risk.collision import CollisionModel
 from executive.risk.hold import critical_mass, hold_problem
-from executive.runner import run_alternative
+from executive.runtime.runner import run_alternative
 from executive.scenario import loads
-from executive.scenario_types import Scenario
-from executive.world import World, build, sample_perturbation
+from executive.scenario.types import Scenario
+from executive.tasks.steps import plan_alternative
+from executive.world.model import World, build, sample_perturbation
 
 __all__ = ["heavy_box_scenario", "main"]
 

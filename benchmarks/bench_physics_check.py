@@ -28,7 +28,7 @@ import mujoco
 import numpy as np
 from bench_executive import STATE, _PeriodRecording, _replay
 
-from executive.assessment import assess_task
+from executive.decision.assessment import assess_task
 from executive.risk.rollouts import (
     RolloutJob,
     RolloutPool,
@@ -38,8 +38,8 @@ from executive.risk.rollouts import (
     with_rollouts,
 )
 from executive.scenario import load
-from executive.scenario_types import Scenario
-from executive.world import build
+from executive.scenario.types import Scenario
+from executive.world.model import build
 
 
 def dry_run_overhead(scenario: Scenario) -> None:

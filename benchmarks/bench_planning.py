@@ -3,7 +3,7 @@
 Measures, in one run (issue #4, "Speed"):
 
 1. planning plus risk assessment of all alternatives of ``book_transfer``
-   (``executive.assessment.assess_task``, what ``executive plan`` does), target under 1 s;
+   (``executive.decision.assessment.assess_task``, what ``executive plan`` does), target under 1 s;
 2. the cost of the risk evaluation per knot (collision profile, fall, grasp and their
    combination, divided by the knots of the alternative's trajectories) against the cost of
    raw ``mujoco.mj_kinematics`` plus raw ``coal.distance`` on exactly the pairs the collision
@@ -28,12 +28,12 @@ import time
 import numpy as np
 from raw_reference import raw_distances, record_pairs
 
-from executive.assessment import AlternativeRisk, assess_plan, assess_task
-from executive.composition import AlternativePlan
-from executive.planning import Planner
+from executive.decision.assessment import AlternativeRisk, assess_plan, assess_task
+from executive.planning.planner import Planner
 from executive.risk.collision import CollisionModel
 from executive.scenario import load
-from executive.world import World, build
+from executive.tasks.steps import AlternativePlan
+from executive.world.model import World, build
 
 __all__ = ["main"]
 

@@ -19,17 +19,17 @@ from typing import ClassVar
 
 import numpy as np
 
-import executive.runner as runner
-from executive.assessment import concatenate
-from executive.composition import plan_alternative
-from executive.detectors import DetectorThresholds, Failure, FailureDetector
-from executive.planning import Planner, PlanningError
-from executive.polygon import signed_margin
-from executive.posture import standing_pelvis_height
+import executive.runtime.runner as runner
+from executive.decision.assessment import concatenate
+from executive.monitoring.detectors import DetectorThresholds, Failure, FailureDetector
+from executive.planning.planner import Planner, PlanningError
 from executive.risk.fall import assess_fall, support_polygon
 from executive.scenario import loads
-from executive.scenario_types import Scenario
-from executive.world import World, build
+from executive.scenario.types import Scenario
+from executive.tasks.steps import plan_alternative
+from executive.world.model import World, build
+from executive.world.polygon import signed_margin
+from executive.world.posture import standing_pelvis_height
 
 __all__ = ["main"]
 

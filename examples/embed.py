@@ -20,9 +20,9 @@ import dataclasses
 import sys
 import time
 
-from executive.approval import ApprovalDecision, ApprovalRequest, CallbackChannel
-from executive.audit import now_iso
-from executive.mission import Executive, freeze_startup_heap
+from executive.decision.approval import ApprovalDecision, ApprovalRequest, CallbackChannel
+from executive.decision.audit import now_iso
+from executive.runtime.mission import Executive, freeze_startup_heap
 from executive.scenario import load
 
 PERIOD_S = 0.01  # the host's control period: 100 Hz

@@ -21,7 +21,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from executive.approval import (
+from executive.decision.approval import (
     AlternativeRisk,
     ApprovalRequest,
     PendingApproval,

@@ -1,4 +1,4 @@
-"""Approval channels (executive/approval.py); the prompt is driven through a real pseudo-terminal."""
+"""Approval channels (executive/decision/approval.py); the prompt is driven through a real pseudo-terminal."""
 
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ import pytest
 import yaml
 from approval_driver import REQUEST  # tests/ is on sys.path (pytest's default prepend import mode)
 
-from executive.approval import (
+from executive.decision.approval import (
     ApprovalDecision,
     CallbackChannel,
     HostChannel,
@@ -26,8 +26,8 @@ from executive.approval import (
     TerminalChannel,
     make_channel,
 )
-from executive.audit import now_iso
-from executive.registry import scenario_path
+from executive.decision.audit import now_iso
+from executive.scenario.bundled import scenario_path
 
 DRIVER = Path(__file__).with_name("approval_driver.py")
 PROMPT = TerminalChannel.PROMPT
@@ -320,7 +320,7 @@ def test_executive_run_prompts_on_a_terminal_and_the_operator_aborts(tmp_path: P
     risky = tmp_path / "risky.yaml"
     risky.write_text(yaml.safe_dump(doc, sort_keys=False))
     script = Path(sys.executable).parent / "executive"
-    cmd = [str(script)] if script.exists() else [sys.executable, "-m", "executive.cli"]
+    cmd = [str(script)] if script.exists() else [sys.executable, "-m", "executive.cli.main"]
     out = tmp_path / "run"
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "TERM": "xterm"}
     term = Terminal([*cmd, "run", str(risky), "--approve", "prompt", "--exact", "--out", str(out)], env=env)

@@ -12,10 +12,10 @@ import pytest
 from behaviours.gripper import Grasp
 from behaviours.move_hand import MoveHand
 from behaviours.robot_access import install
-from executive.execution import SimulatedRobot
-from executive.planning import HandTarget, Planner
+from executive.planning.planner import HandTarget, Planner
+from executive.robot.simulated import SimulatedRobot
 from executive.scenario import load
-from executive.world import World, build
+from executive.world.model import World, build
 
 Status = py_trees.common.Status
 

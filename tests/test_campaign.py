@@ -20,13 +20,13 @@ from typing import Any
 import numpy as np
 import pytest
 
-from executive import registry
-from executive.campaign import FAILURE_MODES, read_trials, run_campaign
-from executive.cli import main
+from executive.cli.main import main
+from executive.scenario import bundled as registry
 from executive.scenario import load
-from executive.scenario_types import Scenario, TrialsConfig
-from executive.stats import clopper_pearson
-from executive.world import build, sample_perturbation
+from executive.scenario.types import Scenario, TrialsConfig
+from executive.validation.campaign import FAILURE_MODES, read_trials, run_campaign
+from executive.validation.stats import clopper_pearson
+from executive.world.model import build, sample_perturbation
 
 ALTERNATIVES = ["left", "left_to_right"]
 TRIALS = 2
@@ -82,9 +82,9 @@ def test_trials_are_the_seeded_truths_executed_in_physics(reference: Path) -> No
 @pytest.mark.slow
 def test_a_trial_reproduces_the_runner_on_its_sampled_truth(reference: Path) -> None:
     """Independent re-execution of one trial with the runner gives the recorded outcome."""
-    from executive.composition import plan_alternative
-    from executive.planning import Planner
-    from executive.runner import execute_plan
+    from executive.planning.planner import Planner
+    from executive.runtime.runner import execute_plan
+    from executive.tasks.steps import plan_alternative
 
     scenario = fixed_estimate()
     record = next(r for r in _records(reference) if r["alternative"] == "left_to_right")
@@ -139,7 +139,7 @@ def test_a_killed_campaign_keeps_its_trials_and_resume_completes_it(reference: P
     text = registry.scenario_path("book_transfer").read_text()
     yaml.write_text(re.sub(r"\n  scene_variation:.*(\n    .*)*", "", text))  # the block, all its lines
     assert fixed_estimate().trials == load(yaml).trials
-    cmd = [sys.executable, "-m", "executive.cli", "campaign", str(yaml), "--trials", str(TRIALS)]
+    cmd = [sys.executable, "-m", "executive.cli.main", "campaign", str(yaml), "--trials", str(TRIALS)]
     cmd += ["--alternatives", ",".join(ALTERNATIVES), "--out", str(out)]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     trials = out / "trials.jsonl"
@@ -211,8 +211,8 @@ def test_ray_backend_gives_the_same_trials(reference: Path, tmp_path: Path) -> N
 @pytest.mark.slow
 def test_a_varied_scene_is_planned_and_predicted_per_trial(reference: Path, tmp_path: Path) -> None:
     """With trials.scene_variation each trial plans on its own shifted scene."""
-    from executive.campaign import predict, trial_scene
-    from executive.scenario_types import SceneVariation
+    from executive.scenario.types import SceneVariation
+    from executive.validation.campaign import predict, trial_scene
 
     base = load("book_transfer")
     variation = SceneVariation(object_position=0.02, object_yaw_rad=np.radians(5), obstacle_position=0.02)
@@ -245,8 +245,8 @@ def test_perception_scale_draws_each_trials_sigmas_and_its_truth_from_them() -> 
     (checked over 4000 trials: mean 0, variance 1 within 5 standard errors), and the factor's
     logarithm is uniform on [log low, log high] (its mean and variance in closed form).
     """
-    from executive.campaign import trial_scene
-    from executive.scenario_types import SceneVariation
+    from executive.scenario.types import SceneVariation
+    from executive.validation.campaign import trial_scene
 
     base = load("book_transfer")
     low, high = 0.5, 2.0

@@ -11,16 +11,16 @@ import mujoco
 import numpy as np
 import pytest
 
-from executive.render import overview_camera
+from executive.report.render import overview_camera
 from executive.scenario import load
-from executive.world import build
+from executive.world.model import build
 
 SCRIPT = Path(sys.executable).parent / "executive"
 
 
 def run(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
-    cmd = [str(SCRIPT), *args] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli", *args]
+    cmd = [str(SCRIPT), *args] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli.main", *args]
     return subprocess.run(cmd, capture_output=True, text=True, cwd=cwd, env=env, timeout=300)
 
 
@@ -39,7 +39,7 @@ def test_validate_bundled_from_another_directory(tmp_path: Path) -> None:
         assert word in text, (word, text)
     # The package found its bundled data from a directory that is not the checkout.
     where = subprocess.run(
-        [sys.executable, "-c", "import executive.registry as r; print(r.bundled_root())"],
+        [sys.executable, "-c", "import executive.scenario.bundled as r; print(r.bundled_root())"],
         capture_output=True,
         text=True,
         cwd=tmp_path,

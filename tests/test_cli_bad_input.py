@@ -22,7 +22,7 @@ from pathlib import Path
 
 import pytest
 
-from executive.cli import main
+from executive.cli.main import main
 
 SCRIPT = Path(sys.executable).parent / "executive"
 
@@ -253,7 +253,7 @@ def test_fidelity_counts_below_one(argv: list[str], needle: str, capsys: pytest.
     ],
 )
 def test_the_console_script_says_the_same(args: list[str], needle: str, tmp_path: Path) -> None:
-    cmd = [str(SCRIPT), *args] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli", *args]
+    cmd = [str(SCRIPT), *args] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli.main", *args]
     done = subprocess.run(cmd, capture_output=True, text=True, cwd=tmp_path, timeout=60)
     assert done.returncode == 2
     assert needle in done.stderr and "Traceback" not in done.stderr
@@ -275,11 +275,11 @@ def test_a_video_that_cannot_be_saved_after_the_run_keeps_the_outcome(
 ) -> None:
     """The folder was writable when the run started and is not when it ends: the video is
     reported lost on stderr and the mission's exit code stands (no exception, no exit 1)."""
-    from executive.cli import _save_video
+    from executive.cli.main import _save_video
     from executive.errors import ExecutiveError
-    from executive.render import VideoRecorder
+    from executive.report.render import VideoRecorder
     from executive.scenario import load
-    from executive.world import build
+    from executive.world.model import build
 
     world = build(load("book_transfer"))
     try:
@@ -299,7 +299,7 @@ def test_a_reader_that_goes_away_is_not_an_error() -> None:
     import subprocess
     import sys
 
-    cmd = [sys.executable, "-m", "executive.cli", "validate", "book_transfer"]
+    cmd = [sys.executable, "-m", "executive.cli.main", "validate", "book_transfer"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     assert proc.stdout is not None
     proc.stdout.readline()

@@ -27,7 +27,7 @@ import pytest
 from hypothesis import HealthCheck, event, given, settings
 from hypothesis import strategies as st
 
-from executive.cli import _parser, main
+from executive.cli.main import _parser, main
 
 LIGHT = ("validate", "list")  # cheap with a valid scenario: no physics
 

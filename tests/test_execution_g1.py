@@ -13,11 +13,12 @@ import mujoco
 import numpy as np
 import pytest
 
-from executive.composition import plan_alternative, transfer_steps
-from executive.planning import Planner
-from executive.runner import execute_plan
+from executive.planning.planner import Planner
+from executive.runtime.runner import execute_plan
 from executive.scenario import loads
-from executive.world import build
+from executive.tasks.steps import plan_alternative
+from executive.tasks.transfer import transfer_steps
+from executive.world.model import build
 
 
 def _yaw(quat: np.ndarray) -> float:

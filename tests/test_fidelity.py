@@ -16,18 +16,18 @@ import mujoco
 import numpy as np
 import pytest
 
-from executive.cli import main
-from executive.regret import (
+from executive.cli.main import main
+from executive.risk.rollouts import with_rollouts
+from executive.scenario import load
+from executive.scenario.types import Scenario
+from executive.validation.regret import (
     TrialTable,
     newcombe_interval,
     regret,
     sign_test,
     trial_table,
 )
-from executive.risk.rollouts import with_rollouts
-from executive.scenario import load
-from executive.scenario_types import Scenario
-from executive.variants import (
+from executive.validation.variants import (
     Variant,
     VariationRanges,
     base_document,
@@ -35,7 +35,7 @@ from executive.variants import (
     scene_problem,
     write_variant,
 )
-from executive.world import build
+from executive.world.model import build
 
 RANGES = VariationRanges()
 
@@ -295,7 +295,7 @@ def test_the_pooled_auc_ceiling_scores_each_trial_by_its_groups_observed_rate() 
     """Two (variant, alternative) groups: 2 events in 4 trials, and none in 4. Scored by the groups'
     rates (0.5, 0), the 2 events beat the 4 trials of the second group and tie the 2 quiet trials
     of their own: AUC (2 x 4 + 0.5 x 2 x 2) / (2 x 6) = 10 / 12."""
-    from executive.fidelity import pooled_statistics
+    from executive.validation.fidelity import pooled_statistics
 
     def record(variant: int, outcome: str) -> dict[str, object]:
         predicted = {"collision": 0.1, "fall": 0.0, "grasp": 0.1, "combined": 0.2, "value": 0.3}

@@ -22,14 +22,14 @@ import py_trees
 import pytest
 
 from behaviours.robot_access import install
-from executive.composition import AlternativePlan, build_subtree, plan_alternative
-from executive.detectors import Failure
-from executive.execution import SimulatedRobot
-from executive.planning import Planner
+from executive.monitoring.detectors import Failure
+from executive.planning.planner import Planner
 from executive.risk.grasp import ApproachEnvelope, approach_envelope, approach_miss_probability
+from executive.robot.simulated import SimulatedRobot
 from executive.scenario import load
-from executive.scenario_types import Scenario
-from executive.world import Perturbation, World, build
+from executive.scenario.types import Scenario
+from executive.tasks.steps import AlternativePlan, build_subtree, plan_alternative
+from executive.world.model import Perturbation, World, build
 
 
 @pytest.fixture(scope="module")
@@ -146,7 +146,7 @@ def test_book_transfer_drop_risk_stays_in_the_observed_range(
     """book_transfer's campaign observed 7% (left) and 10% (right) drops; the assessed drop
     probability (jaws' approach or lateral miss, or the hold) stays within a factor 2 of those,
     and ranks the right hand (whose approach leaves 16 mm on one side) above the left."""
-    from executive.assessment import assess_plan
+    from executive.decision.assessment import assess_plan
     from executive.risk.collision import CollisionModel
 
     scenario, world, plans = book

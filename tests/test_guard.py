@@ -1,4 +1,4 @@
-"""Live risk guards (behaviours/guard.py, executive/live_risk.py) in real physics.
+"""Live risk guards (behaviours/guard.py, executive/monitoring/live_risk.py) in real physics.
 
 The reference for "before a collision happens" is the physics itself: the same
 disturbance without the guard ends in a contact the collision detector reports,
@@ -16,13 +16,13 @@ import pytest
 
 from behaviours.guard import RiskGuard, install_monitor
 from behaviours.robot_access import install
-from executive.composition import AlternativePlan, build_subtree, plan_alternative
-from executive.detectors import FailureDetector
-from executive.execution import SimulatedRobot
-from executive.live_risk import LiveRiskMonitor
-from executive.planning import Planner
+from executive.monitoring.detectors import FailureDetector
+from executive.monitoring.live_risk import LiveRiskMonitor
+from executive.planning.planner import Planner
+from executive.robot.simulated import SimulatedRobot
 from executive.scenario import load
-from executive.world import World, build
+from executive.tasks.steps import AlternativePlan, build_subtree, plan_alternative
+from executive.world.model import World, build
 
 Status = py_trees.common.Status
 SHIFT = (-0.10, 0.0)  # the stack slides 10 cm towards the robot, into the carry lane
@@ -241,8 +241,8 @@ def test_interior_margin_equals_the_polygon_modules_margin() -> None:
     """Without building the hull, the same margin as ``signed_margin(convex_hull(...))`` wherever
     it answers, and it answers for every point clearly inside; random point sets, repeated
     points, collinear sets, and ulp-jittered rectangles (two soles' contact corners)."""
-    from executive.live_risk import interior_margin
-    from executive.polygon import convex_hull, signed_margin
+    from executive.monitoring.live_risk import interior_margin
+    from executive.world.polygon import convex_hull, signed_margin
 
     rng = np.random.default_rng(7)
     answered = inside = 0
@@ -275,8 +275,8 @@ def test_interior_margin_equals_the_polygon_modules_margin() -> None:
 def test_com_margin_equals_the_fall_models_polygon_on_real_contacts() -> None:
     """The guard's CoM margin against ``support_polygon`` of the fall model, on the contacts of a
     robot that leans forward until its support breaks up (then both say: no polygon)."""
-    from executive.polygon import signed_margin
     from executive.risk.fall import support_polygon
+    from executive.world.polygon import signed_margin
 
     scenario = load("book_transfer")
     truth, estimate = build(scenario), build(scenario)

@@ -10,9 +10,9 @@ import mink
 import numpy as np
 import pytest
 
-from executive.planning import Planner
+from executive.planning.planner import Planner
 from executive.scenario import load
-from executive.world import World, build
+from executive.world.model import World, build
 
 
 @pytest.fixture(scope="module")

@@ -22,8 +22,8 @@ import pytest
 import yaml
 from scenario_docs import walk  # tests/ is on sys.path (pytest's default prepend import mode)
 
-from executive import registry
-from executive.cli import main
+from executive.cli.main import main
+from executive.scenario import bundled as registry
 
 Doc = dict[str, Any]
 SOURCE = registry.scenario_path("book_transfer").read_text()
@@ -544,8 +544,8 @@ def test_a_duplicate_key_names_both_lines(tmp_path: Path, capsys: pytest.Capture
 
 
 def test_the_reach_comes_from_the_robot_model() -> None:
-    from executive.robot_model import robot_facts
-    from executive.robots.profile import load_bundled_profile
+    from executive.robot.model import robot_facts
+    from executive.robot.profile import load_bundled_profile
 
     profile = load_bundled_profile("humanoid")
     facts = robot_facts(HUMANOID_MJCF, profile)

@@ -20,14 +20,14 @@ import numpy as np
 import pytest
 import yaml
 
-from executive.approval import ApprovalDecision, ApprovalRequest, CallbackChannel
-from executive.audit import now_iso
-from executive.mission import Executive
-from executive.registry import scenario_path
+from executive.decision.approval import ApprovalDecision, ApprovalRequest, CallbackChannel
+from executive.decision.audit import now_iso
+from executive.runtime.mission import Executive
 from executive.scenario import load
+from executive.scenario.bundled import scenario_path
 
 SCRIPT = Path(sys.executable).parent / "executive"
-CMD = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli"]
+CMD = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli.main"]
 ENV = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
 
 
@@ -218,7 +218,7 @@ def test_the_tick_that_ends_planning_only_swaps_in_subtrees_built_by_the_worker(
     have their planned knots computed there: the ticks compute none while it executes."""
     import threading
 
-    import executive.selector as selector_module
+    import executive.tasks.steps as selector_module
 
     built_in: list[str] = []
     real = selector_module.build_subtree
@@ -247,7 +247,7 @@ def test_the_tick_that_ends_planning_only_swaps_in_subtrees_built_by_the_worker(
 
 _FREEZE_PROBE = """
 import gc, time
-import executive.cli, executive.mission as mission
+import executive.cli.main, executive.runtime.mission as mission
 ex = mission.Executive("book_transfer", approval="auto", truth="exact")
 tracked = len(gc.get_objects())
 t0 = time.perf_counter(); gc.collect(); before = time.perf_counter() - t0

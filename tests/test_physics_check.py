@@ -10,13 +10,13 @@ from typing import Any
 import pytest
 import yaml
 
-from executive.assessment import assess_task
-from executive.mission import Executive
-from executive.registry import scenario_path
+from executive.decision.assessment import assess_task
 from executive.risk.rollouts import check_alternatives, estimate_scenario, run_job, with_rollouts
+from executive.runtime.mission import Executive
 from executive.scenario import load, loads
-from executive.scenario_types import Scenario
-from executive.world import build
+from executive.scenario.bundled import scenario_path
+from executive.scenario.types import Scenario
+from executive.world.model import build
 
 
 def _heavy_box(tmp_path: Path) -> Path:
@@ -59,8 +59,8 @@ def test_an_alternative_whose_dry_run_fails_is_never_executed(tmp_path: Path) ->
     rows = {r["name"]: r for r in request["alternatives"]}
     assert not rows["left_to_right"]["feasible"] and rows["left_to_right"]["reason"] == handover["reason"]
     assert rows["left"]["physics"].startswith("dry run: ok; 4 rollouts: ")
-    from executive.approval import AlternativeRisk as Row
-    from executive.approval import ApprovalRequest, request_table
+    from executive.decision.approval import AlternativeRisk as Row
+    from executive.decision.approval import ApprovalRequest, request_table
 
     table = request_table(
         ApprovalRequest(**{**request, "alternatives": tuple(Row(**r) for r in request["alternatives"])})
@@ -97,7 +97,7 @@ def test_rollouts_are_seeded_and_fused_with_their_counts() -> None:
 
 
 def test_plan_cli_shows_the_dry_runs(capsys: pytest.CaptureFixture[str]) -> None:
-    from executive.cli import main
+    from executive.cli.main import main
 
     assert main(["plan", "book_transfer", "--json"]) == 0
     out = json.loads(capsys.readouterr().out)

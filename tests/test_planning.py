@@ -1,4 +1,4 @@
-"""Tests of the whole-body planner (executive/planning.py) on the book_transfer scene.
+"""Tests of the whole-body planner (executive/planning/planner.py) on the book_transfer scene.
 
 Every number is re-computed from the returned qpos with MuJoCo itself
 (mj_kinematics, mj_comPos, mj_geomDistance) on a fresh MjData, not taken from
@@ -16,7 +16,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from executive.planning import (
+from executive.planning.planner import (
     HandTarget,
     Planner,
     PlannerConfig,
@@ -25,7 +25,7 @@ from executive.planning import (
     hand_top_down_quat,
 )
 from executive.scenario import load
-from executive.world import World, build
+from executive.world.model import World, build
 
 TABLE_Z = 0.80
 BOOK_XY = np.array([0.48, 0.26])

@@ -1,4 +1,4 @@
-"""The safe posture (executive/posture.py) in the planner, the fall detector and the fall model.
+"""The safe posture (executive/world/posture.py) in the planner, the fall detector and the fall model.
 
 References: the pelvis heights of the plans themselves (read from their qpos), MuJoCo physics
 (a servoed squat, the turned-book alternatives executed with truth = estimate), a closed-form
@@ -18,22 +18,22 @@ import pytest
 from scipy.optimize import brentq
 from scipy.stats import norm
 
-from executive.assessment import concatenate
-from executive.composition import plan_alternative
-from executive.detectors import FailureDetector
+from executive.decision.assessment import concatenate
 from executive.errors import RobotProfileError
-from executive.execution import SimulatedRobot
-from executive.planning import HandTarget, Planner, PlanningError
-from executive.planning_limits import PelvisHeightLimit
-from executive.planning_timing import Trajectory
-from executive.polygon import signed_margin
-from executive.posture import SafePosture, standing_pelvis_height
+from executive.monitoring.detectors import FailureDetector
+from executive.planning.limits import PelvisHeightLimit
+from executive.planning.planner import HandTarget, Planner, PlanningError
+from executive.planning.timing import Trajectory
 from executive.risk.fall import assess_fall, support_polygon
-from executive.robots.profile import loads_profile
-from executive.runner import execute_plan
+from executive.robot.profile import loads_profile
+from executive.robot.simulated import SimulatedRobot
+from executive.runtime.runner import execute_plan
 from executive.scenario import load, loads
-from executive.scenario_types import RiskConfig, Uncertainty
-from executive.world import World, build
+from executive.scenario.types import RiskConfig, Uncertainty
+from executive.tasks.steps import plan_alternative
+from executive.world.model import World, build
+from executive.world.polygon import signed_margin
+from executive.world.posture import SafePosture, standing_pelvis_height
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"

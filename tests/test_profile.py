@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 import yaml
 
-from executive import registry
 from executive.errors import RobotProfileError, ScenarioError
-from executive.robots.profile import load_bundled_profile, load_profile, loads_profile
-from executive.robots.profile_types import RobotProfile
+from executive.robot.profile import load_bundled_profile, load_profile, loads_profile
+from executive.robot.profile_types import RobotProfile
+from executive.scenario import bundled as registry
 
 G1_DIR = Path(__file__).resolve().parents[2] / "shared" / "robots" / "unitree_g1"
 

@@ -30,8 +30,8 @@ from executive.risk.collision import (
 )
 from executive.risk.shapes import coal_geometry, coal_transform
 from executive.scenario import load
-from executive.scenario_types import Body, CollisionRiskConfig, RiskConfig
-from executive.world import World, build
+from executive.scenario.types import Body, CollisionRiskConfig, RiskConfig
+from executive.world.model import World, build
 
 FloatArray = np.ndarray
 
@@ -378,8 +378,8 @@ def test_a_carried_object_keeps_its_own_pose_error_first_order_matches_monte_car
     shifted by their own draw per sample. With the stack's error alone the first-order value
     would be far smaller (sigma 1 cm instead of 1.41 cm on the same clearance).
     """
-    from executive.composition import plan_alternative
-    from executive.planning import Planner
+    from executive.planning.planner import Planner
+    from executive.tasks.steps import plan_alternative
 
     scenario = load("book_transfer")
     world = build(scenario)
@@ -415,8 +415,8 @@ def test_the_other_hand_near_a_carried_object_is_a_pair_with_the_objects_own_sig
     MuJoCo's mj_geomDistance between the right hand's geoms and the book at every knot; the
     first-order probability of the closest such pair is Phi(-d / sigma_object) (the hand's pose
     is known, the book's in the hand is not)."""
-    from executive.composition import plan_alternative
-    from executive.planning import Planner
+    from executive.planning.planner import Planner
+    from executive.tasks.steps import plan_alternative
 
     scenario = world.scenario
     plan = plan_alternative(Planner(world), world, scenario.mission[0], "left_to_right")

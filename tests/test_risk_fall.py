@@ -17,7 +17,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy.special import ndtr
 
-from executive.planning_timing import Trajectory
+from executive.planning.timing import Trajectory
 from executive.risk.fall import (
     assess_fall,
     capture_point,
@@ -34,8 +34,8 @@ from executive.risk.fall import (
     support_polygon,
 )
 from executive.scenario import load
-from executive.scenario_types import FallRiskConfig, RiskConfig, Uncertainty
-from executive.world import World, build
+from executive.scenario.types import FallRiskConfig, RiskConfig, Uncertainty
+from executive.world.model import World, build
 
 # Rectangle +-0.10 x +-0.05 m, counter-clockwise.
 RECT = np.array([[-0.10, -0.05], [0.10, -0.05], [0.10, 0.05], [-0.10, 0.05]])

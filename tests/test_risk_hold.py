@@ -18,11 +18,9 @@ import py_trees
 import pytest
 
 from behaviours.robot_access import install
-from executive.assessment import assess_plan
-from executive.composition import AlternativePlan, Step, build_subtree, plan_alternative
-from executive.detectors import FailureDetector
-from executive.execution import SimulatedRobot
-from executive.planning import Planner
+from executive.decision.assessment import assess_plan
+from executive.monitoring.detectors import FailureDetector
+from executive.planning.planner import Planner
 from executive.risk.collision import CollisionModel
 from executive.risk.hold import (
     CarrySpan,
@@ -43,8 +41,10 @@ from executive.risk.hold import (
     slip_critical_mass,
     squaring_turn,
 )
+from executive.robot.simulated import SimulatedRobot
 from executive.scenario import load, loads
-from executive.world import Perturbation, World, build, sample_perturbation
+from executive.tasks.steps import AlternativePlan, Step, build_subtree, plan_alternative
+from executive.world.model import Perturbation, World, build, sample_perturbation
 
 G = 9.81
 PAD_HALF = (0.015, 0.03)  # along x (lateral) and z (approach)

@@ -26,13 +26,13 @@ from typing import Any
 import pytest
 import yaml
 
-from executive.approval import TerminalChannel
-from executive.audit import AuditLog, RunFolderError
-from executive.cli import main
-from executive.registry import scenario_path
+from executive.cli.main import main
+from executive.decision.approval import TerminalChannel
+from executive.decision.audit import AuditLog, RunFolderError
+from executive.scenario.bundled import scenario_path
 
 SCRIPT = Path(sys.executable).parent / "executive"
-CMD = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli"]
+CMD = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli.main"]
 ENV = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "TERM": "xterm"}
 PROMPT = TerminalChannel.PROMPT
 ERASE_LINE = "\r\x1b[2K"
@@ -326,7 +326,7 @@ def _child_run(scenario: Path, out: Path) -> int:
             devnull = os.open(os.devnull, os.O_WRONLY)
             os.dup2(devnull, 1)
             os.dup2(devnull, 2)
-            from executive.mission import Executive
+            from executive.runtime.mission import Executive
 
             with Executive(str(scenario), approval="deny", truth="exact", out=out) as executive:
                 executive.run()
@@ -410,7 +410,7 @@ def test_campaign_resume_counts_a_duplicated_record_once(
 def test_a_second_campaign_on_a_running_campaigns_folder_is_refused(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    from executive.campaign import FolderLock
+    from executive.validation.campaign import FolderLock
 
     scenario = _scenario(tmp_path, alternatives=("left",))
     out = tmp_path / "campaign"

@@ -9,8 +9,9 @@ from pathlib import Path
 import pytest
 import yaml
 
-from executive import registry, scenario
-from executive.scenario_types import RiskConfig, Scenario, SceneVariation, TrialsConfig, Uncertainty
+from executive import scenario
+from executive.scenario import bundled as registry
+from executive.scenario.types import RiskConfig, Scenario, SceneVariation, TrialsConfig, Uncertainty
 
 
 def bundled_dict() -> dict:

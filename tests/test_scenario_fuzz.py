@@ -9,9 +9,10 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from executive import registry, scenario
+from executive import scenario
 from executive.errors import ScenarioError
-from executive.scenario_types import Scenario
+from executive.scenario import bundled as registry
+from executive.scenario.types import Scenario
 
 
 def _valid() -> dict[str, Any]:

@@ -14,8 +14,9 @@ import pytest
 import yaml
 from scenario_docs import walk  # tests/ is on sys.path (pytest's default prepend import mode)
 
-from executive import registry, scenario
+from executive import scenario
 from executive.errors import ScenarioError
+from executive.scenario import bundled as registry
 
 Doc = dict[str, Any]
 

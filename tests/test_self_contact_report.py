@@ -12,9 +12,9 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 
-from executive.detectors import ClosestCall, FailureDetector
+from executive.monitoring.detectors import ClosestCall, FailureDetector
 from executive.scenario import load
-from executive.world import World, build
+from executive.world.model import World, build
 
 
 def _palms_touching_while_parting() -> tuple[World, int, int]:

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from executive.scenario import load, loads
-from executive.world import World, build
+from executive.world.model import World, build
 
 
 def _stand(world: World, seconds: float) -> dict[str, float]:

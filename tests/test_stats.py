@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import stats as scipy_stats
 
-from executive.stats import (
+from executive.validation.stats import (
     brier,
     calibration_bins,
     clopper_pearson,

@@ -67,8 +67,8 @@ from executive.risk.collision_probability import (
 )
 from executive.risk.report import RiskReport
 from executive.risk.shapes import coal_geometry
-from executive.scenario_types import CollisionRiskConfig, RiskConfig, Uncertainty
-from executive.world import World, is_descendant
+from executive.scenario.types import CollisionRiskConfig, RiskConfig, Uncertainty
+from executive.world.model import World, is_descendant
 
 __all__ = [
     "Allow",
@@ -98,7 +98,7 @@ Allow = Collection[str | tuple[str, str]]
 
 
 class TrajectoryLike(Protocol):
-    """What the collision model reads of a trajectory (``executive.planning.Trajectory``)."""
+    """What the collision model reads of a trajectory (``executive.planning.planner.Trajectory``)."""
 
     @property
     def times(self) -> FloatArray: ...

@@ -44,16 +44,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import owens_t
 
-from executive.planning_timing import Trajectory
-from executive.polygon import (
-    check_polygon,
-    clip_polygon,
-    convex_hull,
-    halfplanes,
-    polygon_area,
-    signed_margin,
-)
-from executive.posture import standing_pelvis_height
+from executive.planning.timing import Trajectory
 from executive.risk.fall_batch import (
     edge_probabilities_batch,
     halfplanes_batch,
@@ -63,8 +54,17 @@ from executive.risk.fall_batch import (
 )
 from executive.risk.gaussian import McEstimate, normal_cdf, union_bounds
 from executive.risk.report import RiskReport
-from executive.scenario_types import RiskConfig, Uncertainty
-from executive.world import World
+from executive.scenario.types import RiskConfig, Uncertainty
+from executive.world.model import World
+from executive.world.polygon import (
+    check_polygon,
+    clip_polygon,
+    convex_hull,
+    halfplanes,
+    polygon_area,
+    signed_margin,
+)
+from executive.world.posture import standing_pelvis_height
 
 __all__ = [
     "assess_fall",

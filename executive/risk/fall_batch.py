@@ -3,7 +3,7 @@
 Same formulas as :mod:`executive.risk.fall` (see its module doc for the sources), arranged so a
 trajectory of K knots costs a few array operations instead of K Python-level calls:
 
-* support polygons: the convex hull (Andrew's monotone chain, :func:`executive.polygon.convex_hull`)
+* support polygons: the convex hull (Andrew's monotone chain, :func:`executive.world.polygon.convex_hull`)
   of one knot is reused for the next knots as long as it is still their hull: the same point
   indices form a strictly convex counter-clockwise polygon (every turn's height above its chord
   beyond the hull's tolerance) with every point inside or within that tolerance; otherwise
@@ -20,7 +20,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.special import ndtr, owens_t
 
-from executive.polygon import convex_hull
+from executive.world.polygon import convex_hull
 
 __all__ = [
     "KnotPolygons",
@@ -119,7 +119,7 @@ def halfplanes_batch(v: FloatArray) -> tuple[FloatArray, FloatArray]:
 
 
 def signed_margin_batch(v: FloatArray, x: FloatArray) -> FloatArray:
-    """:func:`executive.polygon.signed_margin` of points x (n, 2) in polygons v (n, m, 2)."""
+    """:func:`executive.world.polygon.signed_margin` of points x (n, 2) in polygons v (n, m, 2)."""
     a, b = halfplanes_batch(v)
     slack = b - np.einsum("nij,nj->ni", a, x)
     inside = np.min(slack, axis=1)

@@ -35,7 +35,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy.special import expit
 
-from executive.planning_timing import Trajectory
+from executive.planning.timing import Trajectory
 from executive.risk.gaussian import (
     exceed_probability,
     gauss_hermite_normal,
@@ -44,8 +44,8 @@ from executive.risk.gaussian import (
     union_bounds,
 )
 from executive.risk.report import RiskReport
-from executive.scenario_types import GraspRiskConfig, RiskConfig, Uncertainty
-from executive.world import World
+from executive.scenario.types import GraspRiskConfig, RiskConfig, Uncertainty
+from executive.world.model import World
 
 __all__ = [
     "CONTACT_MODELS",

@@ -36,7 +36,7 @@ model, per hand and per knot of the planned trajectories while that hand holds t
   when its pads do not overlap the object along the jaws, and loses it later when its
   shallower patch slips on its own carry.
 
-Uncertainty, as :func:`executive.world.sample_perturbation` draws the truth: mass m = m0
+Uncertainty, as :func:`executive.world.model.sample_perturbation` draws the truth: mass m = m0
 max(0.2, 1 + s_m z), the object's friction mu0 max(0.2, 1 + s_f z'), the object's position
 error e ~ N(0, s_p^2) along the grip's lateral axis (it moves the grasp point on the object)
 and its yaw error ~ N(0, s_yaw^2). Every failure above grows with m at fixed (e, yaw, mu), so
@@ -57,12 +57,12 @@ from numpy.typing import NDArray
 from scipy.special import ndtr
 
 from executive.errors import ExecutiveError
-from executive.planning_timing import Trajectory
+from executive.planning.timing import Trajectory
 from executive.risk.gaussian import gauss_hermite_normal
 from executive.risk.grasp import half_extent
 from executive.risk.report import RiskReport
-from executive.scenario_types import RiskConfig, Uncertainty
-from executive.world import World
+from executive.scenario.types import RiskConfig, Uncertainty
+from executive.world.model import World
 
 __all__ = [
     "CarrySpan",
@@ -90,7 +90,7 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 GRAVITY = np.array([0.0, 0.0, -9.81])
-#: The truth sampler's floor on its mass and friction factors (executive.world.sample_perturbation).
+#: The truth sampler's floor on its mass and friction factors (executive.world.model.sample_perturbation).
 SCALE_FLOOR = 0.2
 
 
@@ -597,7 +597,7 @@ def hold_problem(world: World, plan: object, closing_s: float = 0.5) -> HoldProb
 
     Args:
         world: the estimate world the plan was made on.
-        plan: an :class:`executive.composition.AlternativePlan` (steps with kind, name, side;
+        plan: an :class:`executive.tasks.steps.AlternativePlan` (steps with kind, name, side;
             trajectories by step name; task.object).
         closing_s: time a grasp's jaws take to close and settle (the Grasp behaviour's settle
             time), spent with the object at rest in the hands that already hold it.
@@ -893,7 +893,7 @@ def assess_hold(world: World, plan: object, risk_config: RiskConfig, uncertainty
 
     Args:
         world: the estimate world the plan was made on (its object mass is the estimate).
-        plan: an :class:`executive.composition.AlternativePlan`.
+        plan: an :class:`executive.tasks.steps.AlternativePlan`.
         risk_config: the scenario's risk settings (severity of a drop).
         uncertainty: the scenario's 1-sigma errors (object_mass, friction, object_position).
 

@@ -2,7 +2,7 @@
 
 Every feasible alternative is first *dry-run*: executed once in MuJoCo on the estimate itself
 (truth = estimate), through the same subtree, servos and failure detectors as a real run
-(:func:`executive.runner.execute_plan`). A plan that fails with perfect knowledge is
+(:func:`executive.runtime.runner.execute_plan`). A plan that fails with perfect knowledge is
 infeasible. Then, when ``risk.rollouts.count`` > 0, *rollouts*: the surviving alternatives
 executed on truths sampled from the scenario's uncertainty (the campaign's sampler), in rounds
 of ``batch`` per alternative, until the stopping rule of :mod:`executive.risk.fusion` calls
@@ -33,12 +33,12 @@ import numpy as np
 from executive.errors import ExecutiveError
 from executive.risk.combine import CombinedRisk
 from executive.risk.fusion import choice_confidence, fuse, posteriors
-from executive.scenario_types import RiskConfig, Scenario, SceneVariation
+from executive.scenario.types import RiskConfig, Scenario, SceneVariation
 
 if TYPE_CHECKING:
-    from executive.assessment import AlternativeRisk
-    from executive.composition import AlternativePlan
-    from executive.world import World
+    from executive.decision.assessment import AlternativeRisk
+    from executive.tasks.steps import AlternativePlan
+    from executive.world.model import World
 
 __all__ = [
     "PhysicsCheck",
@@ -88,7 +88,7 @@ def estimate_scenario(world: World) -> Scenario:
     Objects are put where the estimate has them now (position, yaw); the trial-to-trial scene
     variation is dropped: the rollouts' truths are sampled around this one estimate.
     """
-    from executive.composition import yaw_of
+    from executive.tasks.hands import yaw_of
 
     scenario = world.scenario
     objects = []
@@ -121,7 +121,7 @@ def with_rollouts(scenario: Scenario, count: int | None) -> Scenario:
 
 
 def _truth(job: RolloutJob) -> World:
-    from executive.world import build, sample_perturbation
+    from executive.world.model import build, sample_perturbation
 
     if job.seed is None:
         world = build(job.scenario)
@@ -143,8 +143,8 @@ def run_job(job: RolloutJob) -> dict[str, Any]:
     ``outcome`` is ``success``, a failure detector's mode, ``timeout``, or ``error`` (the code
     raised: a defect, counted, never hidden).
     """
-    from executive.campaign import error_fields, outcome_fields
-    from executive.runner import execute_plan
+    from executive.runtime.runner import execute_plan
+    from executive.validation.campaign import error_fields, outcome_fields
 
     t0 = time.perf_counter()
     record: dict[str, Any] = {"alternative": job.plan.name, "seed": job.seed, "failure": None}
@@ -345,8 +345,6 @@ def _init_worker() -> None:
 
 def _warm_up() -> None:
     """Import what a job runs (a worker's first job would pay for it)."""
-    import executive.campaign
-    import executive.runner  # noqa: F401
 
 
 class RolloutPool:

@@ -1,0 +1,1 @@
+"""Choosing what to run: assessment of alternatives, the risk-gated selector, approval, the audit log."""

@@ -1,0 +1,229 @@
+"""Risk of whole alternatives: plan each on the estimate, assess every failure mode, combine.
+
+Per alternative:
+
+* collision: every motion step is profiled with coal (with its own allowances:
+  the hand may touch the object it grasps, the object its support while lifted
+  or placed); the first-order probability is taken over the union of all knots
+  of all steps, with one static pose error per body for the whole alternative
+  (as a truth world draws it), and the seed score over the concatenated
+  distance profile;
+* fall: the alternative's steps concatenated into one trajectory; the CoM error
+  is one persistent bias, so its probability is exact over all knots;
+* grasp (the drop mode): the first grasp of the object from the table, against
+  the scene's object pose uncertainty (a handover's second grasp takes the object
+  from a hand whose pose the robot knows; it is not scored here): the jaws must clear the
+  object's sides all the way down the planned approach (offset and yaw jointly), and the
+  placement it leads to: the jaws centre the object across them, but its error
+  along them stays in the hand and lands on the target, where the failure
+  detector calls it misplaced beyond ``place_position_tol`` (see :func:`_grasp`);
+  its union with the hold risk (:mod:`executive.risk.hold`: a grip that slips under
+  the object's weight and the plan's accelerations, or a handover receiver that
+  misses an object turned in the giver's jaws) is the drop mode (:func:`drop_union`);
+* combined: :func:`executive.risk.combine.combine`.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from executive.monitoring.detectors import DetectorThresholds
+from executive.planning.planner import Planner, PlanningError, Trajectory
+from executive.risk.collision import CollisionModel, CollisionProfile, KnotDistance, report_from_profile
+from executive.risk.combine import CombinedRisk, combine
+from executive.risk.fall import assess_fall
+from executive.risk.grasp import (
+    GraspTolerance,
+    approach_envelope,
+    assess_grasp,
+    grasp_error,
+    grasp_tolerance,
+    hand_pose_at,
+)
+from executive.risk.hold import assess_hold
+from executive.risk.report import RiskReport
+from executive.tasks.base import Task
+from executive.tasks.registry import get as task_kind
+from executive.tasks.steps import AlternativePlan, plan_alternative
+from executive.world.model import World
+
+__all__ = ["AlternativeRisk", "assess_plan", "assess_task", "concatenate", "drop_union"]
+
+
+@dataclass(frozen=True)
+class AlternativeRisk:
+    """One alternative of a task: its plan (if feasible) and its risk."""
+
+    name: str
+    feasible: bool
+    risk: CombinedRisk | None
+    plan: AlternativePlan | None
+    error: str = ""
+    plan_s: float = 0.0
+    assess_s: float = 0.0
+    physics: dict[str, Any] | None = None  # the physics check's summary (executive.risk.rollouts)
+
+
+def concatenate(trajectories: list[Trajectory], name: str) -> Trajectory:
+    """One trajectory through every knot of ``trajectories`` in order (times made cumulative)."""
+    times, qpos, com = [], [], []
+    hands: dict[str, list[np.ndarray]] = {side: [] for side in trajectories[0].hand_paths}
+    offset = 0.0
+    for k, traj in enumerate(trajectories):
+        skip = 1 if k > 0 else 0  # a step starts where the previous ended: drop the repeated knot
+        times.append(traj.times[skip:] + offset)
+        qpos.append(traj.qpos[skip:])
+        com.append(traj.com_path[skip:])
+        for side in hands:
+            hands[side].append(traj.hand_paths[side][skip:])
+        offset += traj.duration
+    return Trajectory(
+        name=name,
+        times=np.concatenate(times),
+        qpos=np.concatenate(qpos),
+        hand_paths={side: np.concatenate(parts) for side, parts in hands.items()},
+        com_path=np.concatenate(com),
+        carried=None,
+        free_quat_adr=trajectories[0].free_quat_adr,
+    )
+
+
+def _collision(model: CollisionModel, plan: AlternativePlan) -> RiskReport:
+    """One distance profile through every motion step, each with its own allowances."""
+    obj = plan.task.object
+    times: list[np.ndarray] = []
+    knots: list[KnotDistance] = []
+    offset = 0.0
+    for step in plan.steps:
+        traj = plan.trajectories.get(step.name)
+        if traj is None:
+            continue
+        allow = model.step_allow(step.side, step.kind, obj, step.allow_contact, traj.carried)
+        profile = model.profile(traj, allow=allow)
+        times.append(profile.times + offset)
+        knots.extend(profile.knots)
+        offset += traj.duration
+    return report_from_profile(model, CollisionProfile(np.concatenate(times), tuple(knots)))
+
+
+def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionModel) -> CombinedRisk:
+    """Collision, fall and grasp risk of a planned alternative, and their combination."""
+    scenario = world.scenario
+    ordered = plan.ordered_trajectories()
+    whole = concatenate(ordered, plan.name)
+    fall = assess_fall(world, whole, scenario.risk, scenario.uncertainty)
+    collision = _collision(collision_model, plan)
+    grasp_step = next(s for s in plan.steps if s.kind == "grasp")
+    approach = [s for s in plan.steps[: plan.steps.index(grasp_step)] if s.name in plan.trajectories][-1]
+    down = [
+        plan.trajectories[s.name].qpos
+        for s in plan.steps[: plan.steps.index(grasp_step)]
+        if s.name in plan.trajectories and s.side == grasp_step.side
+    ]
+    grasp = _grasp(
+        world, grasp_step.side, plan.task.object, plan.trajectories[approach.name], np.concatenate(down)
+    )
+    hold = assess_hold(world, plan, scenario.risk, scenario.uncertainty)
+    return combine([collision, fall, drop_union(grasp, hold)], scenario.risk)
+
+
+def drop_union(grasp: RiskReport, hold: RiskReport) -> RiskReport:
+    """The drop mode: the grasp (pose) failure or the hold (mass, friction) failure.
+
+    probability: 1 - (1 - p_grasp)(1 - p_hold), as if independent (the pose error and the
+    mass are drawn independently; the lateral error enters both, so the Fréchet bounds
+    max(p) <= P <= min(1, sum p) are kept as the bounds). details: the grasp's, the hold's, and
+    ``drop_reason`` naming the likelier of the two.
+    """
+    pg, ph = grasp.probability, hold.probability
+    lower = max(grasp.probability_bounds[0], hold.probability_bounds[0])
+    upper = min(1.0, grasp.probability_bounds[1] + hold.probability_bounds[1])
+    details = {**grasp.details, **hold.details, "grasp_probability": pg, "hold_probability": ph}
+    details["drop_reason"] = "hold: the grip slips or a handover's receiver misses" if ph > pg else "grasp"
+    return replace(
+        grasp,
+        probability=1.0 - (1.0 - pg) * (1.0 - ph),
+        probability_bounds=(lower, upper),
+        details=details,
+    )
+
+
+def _grasp(world: World, side: str, obj: str, approach: Trajectory, path: np.ndarray) -> RiskReport:
+    """Grasp risk measured from the grasp point the plan intends, not the object's centre.
+
+    A handover grasps the object off-centre on purpose; that planned offset is no error,
+    but it uses up part of the geometric tolerance along the same axis.
+
+    The object's error along the jaws (the lateral axis) is not corrected by closing them:
+    the hand carries it to the target, so the object rests that far from it. The drop
+    mode's failures include a placement beyond the failure detector's
+    ``place_position_tol``; the same error ``e`` fails the grasp when ``|e|`` exceeds the
+    lateral tolerance, so the union of the two is ``|e| > min(lateral, place_position_tol)``
+    (exact: nested events of one Gaussian, not a bound).
+
+    Across the jaws, the hand must clear the object's sides all the way down, not only at
+    the grasp pose: ``path`` (the grasping hand's poses before the grasp, e.g. its pre-grasp
+    and approach knots) gives the envelope its geoms sweep below the object's top
+    (:func:`executive.risk.grasp.approach_envelope`), and the offset and yaw errors are
+    scored jointly against it (:func:`executive.risk.grasp.approach_miss_probability`).
+    """
+    scenario = world.scenario
+    hand_pos, hand_rot = hand_pose_at(world, approach, side)
+    obj_pos, obj_quat = world.object_pose(obj)
+    rotation = np.zeros(9)
+    mujoco.mju_quat2Mat(rotation, obj_quat)
+    planned = grasp_error(hand_pos, hand_rot, obj_pos, rotation.reshape(3, 3))
+    full = grasp_tolerance(world, side, obj)
+    tolerance = GraspTolerance(
+        max(0.0, full.closing - abs(planned.closing)),
+        min(max(0.0, full.lateral - abs(planned.lateral)), DetectorThresholds().place_position_tol),
+        max(0.0, full.yaw - abs(planned.yaw)),
+    )
+    # The intended grasp point: where the hand is, at the object's height.
+    reference = np.array([hand_pos[0], hand_pos[1], obj_pos[2]])
+    return assess_grasp(
+        world,
+        side,
+        obj,
+        (hand_pos, hand_rot),
+        scenario.risk,
+        scenario.uncertainty,
+        object_pose=(reference, obj_quat),
+        tolerance=tolerance,
+        approach=approach_envelope(world, side, obj, path),
+    )
+
+
+def assess_task(
+    world: World,
+    task: Task,
+    planner: Planner | None = None,
+    collision_model: CollisionModel | None = None,
+    q_start: np.ndarray | None = None,
+) -> list[AlternativeRisk]:
+    """Plan and assess every alternative of ``task`` on the estimate ``world``."""
+    planner = planner or Planner(world)
+    model = collision_model or CollisionModel(
+        world, world.scenario.risk, uncertainty=world.scenario.uncertainty
+    )
+    out = []
+    for alternative in task_kind(task.kind).alternatives(task, world):
+        name = alternative.name
+        if alternative.unsupported:
+            out.append(AlternativeRisk(name, False, None, None, alternative.unsupported))
+            continue
+        t0 = time.perf_counter()
+        try:
+            plan = plan_alternative(planner, world, task, name, q_start)
+        except PlanningError as exc:
+            out.append(AlternativeRisk(name, False, None, None, str(exc), time.perf_counter() - t0))
+            continue
+        t1 = time.perf_counter()
+        risk = assess_plan(world, plan, model)
+        out.append(AlternativeRisk(name, True, risk, plan, "", t1 - t0, time.perf_counter() - t1))
+    return out

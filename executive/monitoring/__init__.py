@@ -1,0 +1,1 @@
+"""Watching execution: failure detectors and the live risk guards."""

@@ -1,0 +1,221 @@
+"""Grasp geometry as named reasons: does an object fit the hand, and can the fingers reach round it?
+
+Checked before planning (:func:`executive.tasks.steps.plan_alternative`), so that a grasp the
+hand cannot make is refused with what is wrong ("the 14 cm 'box' is wider than the 12 cm
+jaw opening of the left hand") instead of an IK residual ("12 mm short").
+
+* Width: the object's extent across the jaws (its local y, the axis a top-down grasp closes
+  along) against the jaw opening. Both come from
+  :func:`executive.risk.grasp.grasp_tolerance` (the opening from the gripper's open and
+  closed positions); for a hand whose actuators do not drive slide jaws the opening is
+  measured on the model instead (:func:`hand_geometry`).
+* Thickness: a top-down grasp puts the hand site ``grip_depth`` under the object's top (never
+  below its centre), and the hand reaches ``finger_depth`` further down; the fingertips must
+  keep the planner's table clearance above the table top.
+
+Usage::
+
+    geometry = hand_geometry(world, "left")
+    check_grasp(world, "left", "book", site_above_table=0.04, table_clearance=0.01, motion="left.approach")
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from executive.planning.types import PlanningError
+from executive.risk.grasp import grasp_tolerance
+from executive.world.model import World
+
+__all__ = ["GraspGeometryError", "HandGeometry", "check_grasp", "hand_geometry", "min_thickness"]
+
+FloatArray = NDArray[np.float64]
+
+#: m of floating-point rounding in the geometry (box corners and targets from rotations).
+_ROUNDING = 1e-6
+#: m either side of the site, across the jaws, that the opening is measured over (a pad's width).
+_FAN_HALF_WIDTH = 0.03
+
+
+class GraspGeometryError(PlanningError):
+    """An object the hand cannot grasp: too wide for its jaws, or too thin for its fingers above the table."""
+
+    def __init__(self, motion: str, side: str, reason: str) -> None:
+        super().__init__(motion, side, 0.0, 0.0, 0, reason)
+
+
+@dataclass(frozen=True)
+class HandGeometry:
+    """A hand's open geometry around its grasp site (m).
+
+    Attributes:
+        jaw_opening: free span between the open jaws along the site's closing axis (y),
+            through the site; inf when nothing of the hand closes across the site.
+        finger_depth: how far the hand reaches past its site along the approach (site z).
+    """
+
+    jaw_opening: float
+    finger_depth: float
+
+
+def _open_hand(world: World) -> mujoco.MjData:
+    """A scratch MjData at the home keyframe (the world builder opens the hands there), posed."""
+    data = mujoco.MjData(world.model)
+    mujoco.mj_resetDataKeyframe(world.model, data, world.ids.keyframe)
+    mujoco.mj_kinematics(world.model, data)
+    return data
+
+
+def _hand_geoms(world: World, side: str) -> list[int]:
+    """The collision geoms of the hand's subtree."""
+    model = world.model
+    bodies = set(world.ids.hand_bodies[side])
+    return [
+        g
+        for g in range(model.ngeom)
+        if int(model.geom_bodyid[g]) in bodies and (model.geom_contype[g] or model.geom_conaffinity[g])
+    ]
+
+
+def _corners(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> FloatArray:
+    """World corners (8, 3) of a geom's local bounding box (the box itself for a box geom)."""
+    centre, half = model.geom_aabb[geom, :3], model.geom_aabb[geom, 3:]
+    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))
+    rot = data.geom_xmat[geom].reshape(3, 3)
+    return np.asarray(data.geom_xpos[geom] + (centre + signs * half) @ rot.T, dtype=float)
+
+
+def _ray(
+    model: mujoco.MjModel, data: mujoco.MjData, geoms: list[int], start: FloatArray, way: FloatArray
+) -> float:
+    """Distance from ``start`` along the unit vector ``way`` to the first of ``geoms`` (inf: none)."""
+    best = np.inf
+    for g in geoms:
+        if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
+            hit = mujoco.mj_rayMesh(model, data, g, start, way)
+        else:
+            hit = mujoco.mju_rayGeom(
+                data.geom_xpos[g], data.geom_xmat[g], model.geom_size[g], start, way, int(model.geom_type[g])
+            )
+        if hit >= 0.0:
+            best = min(best, float(hit))
+    return float(best)
+
+
+def hand_geometry(world: World, side: str) -> HandGeometry:
+    """Measure the ``side`` hand, open (the home keyframe), on the world's model.
+
+    The jaw opening is the free span through the site along its closing axis: rays from the
+    site both ways to the hand's collision geoms (``mj_rayMesh`` / ``mju_rayGeom``). The
+    finger depth is the largest extent of those geoms' bounding boxes along the site's
+    approach axis (z), from the site.
+
+    Args:
+        world: the world whose robot has the hand.
+        side: the arm ("left" or "right").
+
+    Returns:
+        The hand's :class:`HandGeometry`.
+    """
+    model = world.model
+    data = _open_hand(world)
+    site = world.ids.hand_sites[side]
+    origin = data.site_xpos[site].copy()
+    frame = data.site_xmat[site].reshape(3, 3)
+    closing, approach = frame[:, 1].copy(), frame[:, 2].copy()
+    geoms = _hand_geoms(world, side)
+    corners = np.vstack([_corners(model, data, g) for g in geoms])
+    depth = max(float(np.max((corners - origin) @ approach)), 0.0)
+    # Parallel rays through the region an object between the jaws fills: across the site's
+    # lateral axis (x) and down its approach axis to the fingertips; each jaw's nearest hit.
+    lateral = frame[:, 0]
+    starts = [
+        origin + a * lateral + b * approach
+        for a in np.linspace(-_FAN_HALF_WIDTH, _FAN_HALF_WIDTH, 5)
+        for b in np.linspace(0.0, depth, 3)
+    ]
+    near = min(_ray(model, data, geoms, p, closing) for p in starts)
+    far = min(_ray(model, data, geoms, p, -closing) for p in starts)
+    return HandGeometry(jaw_opening=near + far, finger_depth=depth)
+
+
+def _width_and_opening(world: World, side: str, obj: str) -> tuple[float, float]:
+    """The object's width across the jaws and the jaw opening (m), from ``grasp_tolerance``.
+
+    ``closing = (opening - width) / 2``: asked with a zero opening it gives the width; asked
+    with the gripper's own opening (its slide jaws' open and closed positions) the opening.
+    A hand without slide jaws has its opening measured (:func:`hand_geometry`).
+    """
+    width = -2.0 * grasp_tolerance(world, side, obj, jaw_opening=0.0).closing
+    try:
+        opening = 2.0 * grasp_tolerance(world, side, obj).closing + width
+    except ValueError:  # not slide jaws: the opening the model's open hand leaves
+        opening = hand_geometry(world, side).jaw_opening
+    return width, opening
+
+
+def min_thickness(finger_depth: float, table_clearance: float, grip_depth: float) -> float:
+    """The thinnest object (m) a top-down grasp takes off a table with the fingers clear of it.
+
+    The site is ``grip_depth`` under the top, never below the centre: ``max(t / 2, t - grip_depth)``
+    above the table for thickness ``t``; the fingertips are ``finger_depth`` lower and must stay
+    ``table_clearance`` above the table.
+    """
+    need = finger_depth + table_clearance
+    return need + grip_depth if need >= grip_depth else 2.0 * need
+
+
+def check_grasp(
+    world: World,
+    side: str,
+    obj: str,
+    *,
+    motion: str,
+    site_above_table: float | None,
+    table_clearance: float,
+    grip_depth: float,
+) -> None:
+    """Raise :class:`GraspGeometryError` if the ``side`` hand cannot grasp ``obj`` top-down.
+
+    Args:
+        world: the estimate world.
+        side: the grasping hand.
+        obj: the object's name.
+        motion: the motion that brings the hand onto the object (named in the error).
+        site_above_table: the grasp site's planned height above the table top (m); None for a
+            grasp away from the table (a handover), where only the width is checked.
+        table_clearance: how far (m) the planner keeps the hand off the table.
+        grip_depth: how far (m) under the object's top the composition puts the site.
+
+    Raises:
+        GraspGeometryError: naming the object's width and the jaw opening, or its thickness and
+            the thickness the fingers need above the table.
+    """
+    width, opening = _width_and_opening(world, side, obj)
+    if width >= opening:
+        raise GraspGeometryError(
+            motion,
+            side,
+            f"the {width * 100:.0f} cm '{obj}' is wider than the {opening * 100:.0f} cm jaw opening "
+            f"of the {side} hand",
+        )
+    if site_above_table is None:
+        return
+    depth = hand_geometry(world, side).finger_depth
+    if site_above_table - depth >= table_clearance - _ROUNDING:
+        return
+    body = next(b for b in world.scenario.scene.objects if b.name == obj)
+    thickness = 2.0 * body.half_height()
+    need = min_thickness(depth, table_clearance, grip_depth)
+    raise GraspGeometryError(
+        motion,
+        side,
+        f"the {thickness * 100:.0f} cm '{obj}' is thinner than the {need * 100:.0f} cm the fingers need "
+        f"above the table (the {side} hand reaches {depth * 100:.1f} cm past its grasp point, which is "
+        f"{site_above_table * 100:.1f} cm above the table, and keeps {table_clearance * 100:.0f} cm off it)",
+    )

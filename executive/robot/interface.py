@@ -1,0 +1,157 @@
+"""How the executive talks to a robot it does not simulate itself.
+
+Behaviours use a robot through a small surface (:class:`RobotInterface`): the
+time, a MuJoCo ``world``/``data`` holding the robot's *current* state (for hand
+positions, contacts and the detectors), joint targets, the gripper, a safe hold.
+:class:`executive.robot.simulated.SimulatedRobot` is that surface over the bundled
+physics. For a host's own robot, :class:`HostRobot` builds it from an even
+smaller protocol the host implements, :class:`JointIO`: read the joint state and
+base pose (and, if the robot perceives them, object poses), send joint targets
+and gripper commands, and report touch (hand links on an object, normal force)
+so a grasp can be verified. ``HostRobot.sync()`` copies the measured state into a
+MuJoCo mirror of the scenario (``mj_forward``: kinematics, contacts, forces) and
+runs the failure detectors on it; the host calls it once per control period,
+before :meth:`executive.runtime.mission.Executive.tick`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Protocol
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from executive.errors import ExecutiveError
+from executive.monitoring.detectors import Failure, FailureDetector
+from executive.world.model import World
+
+__all__ = ["HostRobot", "JointIO", "JointState", "RobotInterface"]
+
+FloatArray = NDArray[np.float64]
+
+
+class RobotInterface(Protocol):
+    """What behaviours and the executive use of a robot (SimulatedRobot and HostRobot have it)."""
+
+    world: World
+    data: mujoco.MjData
+    control_dt: float
+    detector: FailureDetector
+
+    @property
+    def time(self) -> float: ...
+
+    @property
+    def failure(self) -> Failure | None: ...
+
+    def set_joint_targets(self, q_target: FloatArray, qvel_target: FloatArray | None = None) -> None: ...
+
+    def set_gripper(self, side: str, closed: bool) -> None: ...
+
+    def hold(self) -> None: ...
+
+
+@dataclass(frozen=True)
+class JointState:
+    """One reading of the robot: time (s), joint positions by joint name, base pose, objects seen."""
+
+    time: float
+    joints: Mapping[str, float]
+    base_position: tuple[float, float, float]
+    base_quat: tuple[float, float, float, float]  # w x y z
+    objects: Mapping[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)  # name -> pos, quat
+
+
+class JointIO(Protocol):
+    """The host's side: read the robot, send it targets."""
+
+    def read(self) -> JointState: ...
+
+    def send_joint_targets(self, targets: Mapping[str, float]) -> None: ...
+
+    def send_gripper(self, side: str, closed: bool) -> None: ...
+
+    def hand_contacts(self, side: str, obj: str) -> tuple[int, float]:
+        """Touch sensing: how many hand links touch ``obj`` and the total normal force (N)."""
+        ...
+
+
+class HostRobot:
+    """A :class:`RobotInterface` over a host's :class:`JointIO`, mirrored into ``world``.
+
+    ``world`` is a world of the same scenario (its own instance, not the estimate the
+    planner uses); its data becomes the measured state on every :meth:`sync`.
+    """
+
+    def __init__(self, world: World, io: JointIO, control_dt: float = 0.01) -> None:
+        self.world, self.io, self.control_dt = world, io, control_dt
+        self.model, self.data = world.model, world.data
+        self.detector = FailureDetector(world)
+        model = self.model
+        self._joints: dict[str, int] = {}
+        for j in range(model.njnt):
+            name = model.joint(j).name
+            body = model.jnt_bodyid[j]
+            if name and body in world.ids.robot_bodies and model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE:
+                self._joints[name] = int(model.jnt_qposadr[j])
+        base_joint = next((j for j in range(model.njnt) if model.jnt_bodyid[j] == world.ids.base_body), None)
+        if base_joint is None or model.jnt_type[base_joint] != mujoco.mjtJoint.mjJNT_FREE:
+            raise ExecutiveError("HostRobot needs a robot whose base body has a free joint")
+        self._base = int(model.jnt_qposadr[base_joint])
+        self._time = 0.0
+        self._seen: dict[str, tuple[FloatArray, FloatArray]] = {}
+        self.q_target: FloatArray = self.data.qpos.copy()
+        self.sync()
+        self.q_target = self.data.qpos.copy()
+
+    @property
+    def joint_names(self) -> tuple[str, ...]:
+        return tuple(self._joints)
+
+    @property
+    def time(self) -> float:
+        return self._time
+
+    @property
+    def failure(self) -> Failure | None:
+        return self.detector.failure
+
+    def sync(self) -> Failure | None:
+        """Read the robot into the mirror, compute its kinematics and contacts, run the detectors."""
+        state = self.io.read()
+        qpos = self.data.qpos
+        missing = [name for name in self._joints if name not in state.joints]
+        if missing:
+            raise ExecutiveError(f"the host's joint state lacks {len(missing)} joints, e.g. {missing[:3]}")
+        for name, adr in self._joints.items():
+            qpos[adr] = state.joints[name]
+        qpos[self._base : self._base + 3] = state.base_position
+        qpos[self._base + 3 : self._base + 7] = state.base_quat
+        for name, (pos, quat) in state.objects.items():
+            adr = self.world.ids.object_qpos[name]
+            qpos[adr : adr + 3], qpos[adr + 3 : adr + 7] = pos, quat
+        self._seen = {k: (np.asarray(p, float), np.asarray(q, float)) for k, (p, q) in state.objects.items()}
+        self._time = float(state.time)
+        self.data.time = self._time
+        mujoco.mj_forward(self.model, self.data)
+        return self.detector.check()
+
+    def observe_objects(self) -> dict[str, tuple[FloatArray, FloatArray]]:
+        return dict(self._seen)
+
+    def set_joint_targets(self, q_target: FloatArray, qvel_target: FloatArray | None = None) -> None:
+        self.q_target = np.asarray(q_target, dtype=float)
+        self.io.send_joint_targets({name: float(self.q_target[adr]) for name, adr in self._joints.items()})
+
+    def set_gripper(self, side: str, closed: bool) -> None:
+        self.io.send_gripper(side, closed)
+
+    def hand_contacts(self, side: str, obj: str) -> tuple[int, float]:
+        """The robot's own touch sensing (a kinematic mirror has no trustworthy contact forces)."""
+        return self.io.hand_contacts(side, obj)
+
+    def hold(self) -> None:
+        self.set_joint_targets(self.data.qpos.copy())

@@ -1,0 +1,352 @@
+"""Executing joint targets in the truth world: position servos, gravity feed-forward, detectors.
+
+The behaviours never step physics. Each tick they set targets on a
+:class:`SimulatedRobot`; the host then calls :meth:`SimulatedRobot.advance`,
+which steps MuJoCo for one control period at the model's timestep, with the
+failure detectors' contact check after every physics step and their full check
+at the end of the period.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from executive.monitoring.detectors import Failure, FailureDetector
+from executive.world.model import World
+
+__all__ = ["JointTargetController", "SimulatedRobot"]
+
+FloatArray = NDArray[np.float64]
+
+
+def _as_slice(index: NDArray[np.int_]) -> slice | NDArray[np.int_]:
+    """``index`` as a slice when it is a contiguous ascending run (numpy then takes a view)."""
+    if len(index) and np.array_equal(index, np.arange(index[0], index[0] + len(index))):
+        return slice(int(index[0]), int(index[0]) + len(index))
+    return index
+
+
+class JointTargetController:
+    """Maps a full-model qpos target to the robot's position-servo ctrl.
+
+    MuJoCo's position actuator applies ``kp (ctrl - q) - kv qdot``; to hold a
+    joint at ``q*`` against a static load torque ``tau`` the servo needs
+    ``ctrl = q* + tau / kp`` (feed-forward). The static load is
+    ``tau = g(q) - J_c^T f`` (``M qacc + bias = tau + J_c^T f`` with ``qacc = 0``):
+
+    * arm and waist joints: ``qfrc_bias`` of the current state, the gravity of the
+      links they carry (no contact term: a contact on the arm is not pushed against);
+      :meth:`period` holds it over a control period;
+    * leg joints: for a floating-base robot ``g`` of a leg joint is only the weight of
+      the links *below* it; the body the stance leg carries reaches it through the
+      floor's support. The support wrenches ``f`` (one per foot, at the foot body) are
+      the least-squares solution of the floating base's equilibrium
+      ``J_c,base^T f = g_base`` in the *target* pose, so ``tau_legs = g_legs - J_c,legs^T f``
+      is the torque that holds the planned pose without any sag. It is a model-based
+      feed-forward (computed once per new target), not a measured one: feeding back the
+      measured contact forces would cancel the ankles' stiffness against toppling.
+
+    Gripper actuators are left to :meth:`SimulatedRobot.set_gripper`.
+    """
+
+    def __init__(self, world: World) -> None:
+        model = world.model
+        grippers = {a for ids in world.ids.gripper_actuators.values() for a in ids}
+        arm_and_waist = {j for ids in world.ids.arm_joints.values() for j in ids}
+        for name in world.profile.waist_joints:
+            arm_and_waist.add(int(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)))
+        legs = {
+            int(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name))
+            for names in world.profile.leg_joints.values()
+            for name in names
+        }
+        self.model = model
+        self._scratch = mujoco.MjData(model)
+        self.feet = [int(model.body(foot.body).id) for foot in world.profile.feet.values()]
+        free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+        base = next(j for j in free if int(model.jnt_bodyid[j]) == world.ids.base_body)
+        self.base_dofs = np.arange(int(model.jnt_dofadr[base]), int(model.jnt_dofadr[base]) + 6)
+        acts, qadr, dadr, kp, kv, ff, support = [], [], [], [], [], [], []
+        for a in range(model.nu):
+            if a in grippers or model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT:
+                continue
+            joint = int(model.actuator_trnid[a, 0])
+            acts.append(a)
+            qadr.append(int(model.jnt_qposadr[joint]))
+            dadr.append(int(model.jnt_dofadr[joint]))
+            kp.append(float(model.actuator_gainprm[a, 0]))
+            kv.append(-float(model.actuator_biasprm[a, 2]))  # position servo bias: -kp q - kv qdot
+            ff.append(joint in arm_and_waist or joint in legs)
+            support.append(joint in legs)
+        self.actuators = np.array(acts, dtype=int)
+        self.qpos_adr = np.array(qadr, dtype=int)
+        self.dof_adr = np.array(dadr, dtype=int)
+        self.kp = np.array(kp)
+        self.kv = np.array(kv)
+        self.feed_forward = np.array(ff, dtype=bool)
+        self.support = np.array(support, dtype=bool)
+        self._leg_dofs = self.dof_adr[self.support]
+        self._kv_over_kp = self.kv / self.kp
+        self._bias = self.feed_forward & ~self.support  # arm and waist servos
+        self._bias_dofs = self.dof_adr[self._bias]
+        self._bias_kp = self.kp[self._bias]
+        self._support_kp = self.kp[self.support]
+        self._bias_idx = np.flatnonzero(self._bias)
+        self._support_idx = np.flatnonzero(self.support)
+        self._fixed = np.zeros(len(self.actuators))
+        self._ramp_key: tuple[int, float] | None = None
+        self._ramp: NDArray[np.floating[Any]] = np.zeros((0, 1))
+        # leg_loads' index work: slices where the indices are contiguous (views, no copies)
+        self._base_take = _as_slice(self.base_dofs)
+        self._leg_take = _as_slice(self._leg_dofs)
+        self._support_take = _as_slice(self._support_idx)
+        self.ctrl_low = model.actuator_ctrlrange[self.actuators, 0]
+        self.ctrl_high = model.actuator_ctrlrange[self.actuators, 1]
+
+    def leg_load(self, q_target: FloatArray) -> FloatArray:
+        """Static torque of each leg actuator holding ``q_target`` on both feet (0 elsewhere):
+        :meth:`leg_loads` of the one target."""
+        return self.leg_loads(np.asarray(q_target, dtype=float)[None, :])[0]
+
+    def leg_loads(self, q_targets: FloatArray) -> FloatArray:
+        """:meth:`leg_load` of each row of ``q_targets`` (N, nq): (N, actuators).
+
+        Per target, MuJoCo's gravity torques (``mj_rne`` at rest) and the feet's Jacobians; the
+        support wrenches are then the minimum-norm solution of ``A f = g_base`` (``A`` =
+        ``J_c,base^T``, 6 x 12, full row rank: each foot's base block is a rigid transform),
+        ``f = A^T (A A^T)^-1 g_base`` (what ``numpy.linalg.lstsq`` returns, to rounding), solved
+        for all targets in one batch. A stream of targets known ahead
+        (:class:`behaviours.move_hand.MoveHand`) asks for half a second of them at once.
+        """
+        q_targets = np.asarray(q_targets, dtype=float)
+        n = len(q_targets)
+        model, d = self.model, self._scratch
+        gravity = np.empty((n, model.nv))
+        jac = np.empty((n, 6 * len(self.feet), model.nv))
+        d.qvel[:] = 0.0
+        for k, q in enumerate(q_targets):
+            d.qpos[:] = q
+            mujoco.mj_kinematics(model, d)
+            mujoco.mj_comPos(model, d)
+            mujoco.mj_rne(model, d, 0, gravity[k])  # qvel = 0, no acceleration: gravity only
+            for i, foot in enumerate(self.feet):
+                mujoco.mj_jacBody(model, d, jac[k, 6 * i : 6 * i + 3], jac[k, 6 * i + 3 : 6 * i + 6], foot)
+        base = jac[:, :, self._base_take]  # (N, 12, 6): A^T per target
+        g_base = gravity[:, self._base_take]
+        normal = np.matmul(base.transpose(0, 2, 1), base)  # A A^T
+        try:
+            np.linalg.cholesky(normal)  # positive definite: every stance well posed (two feet)
+            wrench = np.matmul(base, np.linalg.solve(normal, g_base[:, :, None]))[:, :, 0]
+        except np.linalg.LinAlgError:  # a degenerate stance (never on two feet): least squares
+            wrench = np.array(
+                [np.linalg.lstsq(b.T, g, rcond=None)[0] for b, g in zip(base, g_base, strict=True)]
+            )
+        loads = np.zeros((n, len(self.dof_adr)))
+        legs = jac[:, :, self._leg_take]  # (N, 12, legs)
+        loads[:, self._support_take] = (
+            gravity[:, self._leg_take] - np.matmul(legs.transpose(0, 2, 1), wrench[:, :, None])[:, :, 0]
+        )
+        return loads
+
+    def joint_ctrl(
+        self,
+        q_target: FloatArray,
+        data: mujoco.MjData,
+        leg_load: FloatArray | None = None,
+        qvel_target: FloatArray | None = None,
+    ) -> FloatArray:
+        """Servo targets for the non-gripper actuators, in the order of ``self.actuators``.
+
+        ``leg_load``: :meth:`leg_load` of ``q_target`` (computed here when not given).
+        ``qvel_target``: the target's joint velocity (full-model qpos layout; robot joints are
+        hinges and slides): the servo's damping ``kv qdot`` is fed forward as ``kv / kp qdot*``,
+        so a joint that follows a moving target does not lag it by ``kv / kp`` seconds.
+        """
+        ctrl = q_target[self.qpos_adr].copy()
+        if qvel_target is not None:
+            ctrl += self.kv / self.kp * qvel_target[self.qpos_adr]
+        load = np.where(self.support, 0.0, data.qfrc_bias[self.dof_adr])
+        load += self.leg_load(q_target) if leg_load is None else leg_load
+        ctrl[self.feed_forward] += load[self.feed_forward] / self.kp[self.feed_forward]
+        return np.clip(ctrl, self.ctrl_low, self.ctrl_high)
+
+    def period(
+        self,
+        q_target: FloatArray,
+        leg_load: FloatArray,
+        qvel_target: FloatArray | None,
+        steps: int,
+        timestep: float,
+        data: mujoco.MjData,
+    ) -> ServoPeriod:
+        """:meth:`joint_ctrl` for the ``steps`` physics steps of one control period, prepared at once.
+
+        Step ``k`` servos to ``q_target + k timestep qvel_target`` (the ramp); the arm/waist
+        feed-forward is ``data.qfrc_bias`` at the start of the period, held for its steps (the
+        gravity torque of an arm moving at 1 rad/s changes by about 2 % of itself in a 20 ms
+        period; the servo's stiffness takes up the rest). Row ``k`` is bit for bit
+        ``joint_ctrl(q_target + k timestep qvel_target, data, leg_load, qvel_target)`` with
+        ``data`` as it is now.
+        """
+        q = q_target[self.qpos_adr]
+        if qvel_target is not None:
+            v = qvel_target[self.qpos_adr]
+            if self._ramp_key != (steps, timestep):
+                self._ramp_key = (steps, timestep)
+                self._ramp = (np.arange(steps) * timestep)[:, None]
+            base = q + self._ramp * v  # (steps, n)
+            base += self._kv_over_kp * v
+        else:
+            base = q[None, :]  # every step the same: one row
+        # The arithmetic (operands, order, rounding) of joint_ctrl: legs get the model-based
+        # load of the target, arms and waist qfrc_bias, the rest + 0.0 (exact).
+        fixed = self._fixed  # zero but for the entries written here
+        fixed[self._bias_idx] = data.qfrc_bias[self._bias_dofs] / self._bias_kp
+        fixed[self._support_idx] = leg_load[self._support_idx] / self._support_kp
+        base += fixed
+        ctrl = np.maximum(base, self.ctrl_low, out=base)  # np.clip, without its wrapper
+        np.minimum(ctrl, self.ctrl_high, out=ctrl)
+        return ServoPeriod(self.actuators, ctrl, moving=qvel_target is not None)
+
+
+class ServoPeriod:
+    """One control period of :class:`JointTargetController`: the servo ctrl of each physics step."""
+
+    def __init__(self, actuators: NDArray[np.int_], ctrl: FloatArray, *, moving: bool) -> None:
+        self.actuators = actuators
+        self.ctrl = ctrl  # (steps, len(actuators)); a fixed target: one row for all steps
+        self.moving = moving  # False: every step's ctrl is row 0
+
+    def write(self, k: int, data: mujoco.MjData) -> None:
+        """Servo ctrl of the period's ``k``-th physics step into ``data.ctrl``."""
+        data.ctrl[self.actuators] = self.ctrl[k if self.moving else 0]
+
+
+@dataclass
+class StepStats:
+    physics_steps: int = 0
+    physics_wall_s: float = 0.0
+
+
+class SimulatedRobot:
+    """The truth world driven through its actuators, watched by a :class:`FailureDetector`."""
+
+    def __init__(
+        self,
+        world: World,
+        control_dt: float = 0.02,
+        detector: FailureDetector | None = None,
+    ) -> None:
+        self.world = world
+        self.model = world.model
+        self.data = world.data
+        self.control_dt = control_dt
+        self.substeps = max(1, round(control_dt / self.model.opt.timestep))
+        self.detector = detector if detector is not None else FailureDetector(world)
+        self.controller = JointTargetController(world)
+        self.q_target: FloatArray = self.data.qpos.copy()
+        self.qvel_target: FloatArray = np.zeros(self.model.nq)
+        self._leg_load = self.controller.leg_load(self.q_target)
+        self.gripper_ctrl: dict[str, FloatArray] = {}
+        self._gripper_idx: dict[str, NDArray[np.intp]] = {}
+        for side in world.profile.arms:
+            ids = np.array(list(world.ids.gripper_actuators[side]), dtype=np.intp)
+            self._gripper_idx[side] = ids
+            self.gripper_ctrl[side] = self.data.ctrl[ids].copy()
+        self.stats = StepStats()
+
+    @property
+    def time(self) -> float:
+        return float(self.data.time)
+
+    @property
+    def failure(self) -> Failure | None:
+        return self.detector.failure
+
+    def set_joint_targets(
+        self,
+        q_target: FloatArray,
+        qvel_target: FloatArray | None = None,
+        *,
+        leg_load: FloatArray | None = None,
+    ) -> None:
+        """Targets for every robot joint, given as a full-model qpos (object entries ignored).
+
+        ``qvel_target`` (same layout, d q_target / dt): the target moves on at this rate during
+        the control period (the servos track a ramp, not a staircase) and the servos' damping
+        is fed forward. None: a fixed target.
+
+        ``leg_load``: ``controller.leg_load(q_target)`` if the caller has it already (e.g. from
+        :meth:`JointTargetController.leg_loads` over targets known ahead); None: computed here
+        for a new target.
+        """
+        q = np.asarray(q_target, dtype=float)
+        old = self.q_target
+        if leg_load is not None:
+            self._leg_load = leg_load
+        elif q.shape != old.shape or not (q == old).all():  # np.array_equal, without its wrapper
+            self._leg_load = self.controller.leg_load(q)
+        self.q_target = q
+        self.qvel_target = np.zeros(self.model.nq) if qvel_target is None else np.asarray(qvel_target, float)
+
+    def set_gripper(self, side: str, closed: bool) -> None:
+        grip = self.world.profile.arms[side].gripper
+        self.gripper_ctrl[side] = np.array(grip.closed if closed else grip.open, dtype=float)
+
+    def gripper_opening(self, side: str) -> float:
+        """Mean absolute position of the gripper's actuated joints (0 = closed for the humanoid)."""
+        joints = self.model.actuator_trnid[list(self.world.ids.gripper_actuators[side]), 0]
+        return float(np.mean(np.abs(self.data.qpos[self.model.jnt_qposadr[joints]])))
+
+    def hold(self) -> None:
+        """Safe hold: servo every joint to where it is now."""
+        self.q_target = self.data.qpos.copy()
+        self.qvel_target = np.zeros(self.model.nq)
+        self._leg_load = self.controller.leg_load(self.q_target)
+
+    def advance(self) -> Failure | None:
+        """Step physics for one control period; stop early at the first detected failure.
+
+        The detectors look at the contacts after every physics step
+        (:meth:`FailureDetector.check_contacts`) and at the whole state after the period's last
+        step (:meth:`FailureDetector.check`). The servo targets are those of
+        :meth:`JointTargetController.joint_ctrl` for each step (the target ramps on at
+        ``qvel_target``; the arm/waist gravity feed-forward is ``qfrc_bias`` at the start of the
+        period), all computed at once (:meth:`JointTargetController.period`); a fixed target
+        writes them once.
+        """
+        data, model = self.data, self.model
+        start = time.perf_counter()
+        moving = bool(self.qvel_target.any())
+        servo = self.controller.period(
+            self.q_target,
+            self._leg_load,
+            self.qvel_target if moving else None,
+            self.substeps,
+            model.opt.timestep,
+            data,
+        )
+        ctrl = data.ctrl
+        for side, values in self.gripper_ctrl.items():  # fixed over the period
+            ctrl[self._gripper_idx[side]] = values
+        acts, rows = servo.actuators, servo.ctrl
+        ctrl[acts] = rows[0]
+        check_contacts = self.detector.check_contacts
+        steps, last = 0, self.substeps - 1
+        for k in range(self.substeps):
+            if k and moving:
+                ctrl[acts] = rows[k]
+            mujoco.mj_step(model, data)
+            steps += 1
+            if (check_contacts() if k < last else self.detector.check()) is not None:
+                self.hold()
+                break
+        self.stats.physics_steps += steps
+        self.stats.physics_wall_s += time.perf_counter() - start
+        return self.detector.failure

@@ -1,1 +1,0 @@
-"""Robot profiles: what the executive needs to know about a robot beyond its MJCF."""

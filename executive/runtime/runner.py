@@ -1,0 +1,165 @@
+"""Running one named alternative end to end: plan on the estimate, execute in the truth.
+
+This is the host loop of the executive in its simplest form: tick the tree
+once, step physics one control period, repeat, until the tree is done or a
+time limit passes. Risk-based selection between alternatives builds on it.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import cast, get_args
+
+import numpy as np
+import py_trees
+
+from behaviours.robot_access import install
+from executive.monitoring.detectors import Failure, FailureDetector, FailureMode
+from executive.planning.planner import Planner, PlanningError
+from executive.robot.simulated import SimulatedRobot
+from executive.scenario.types import Scenario
+from executive.tasks.base import Task
+from executive.tasks.registry import get as task_kind
+from executive.tasks.steps import AlternativePlan, plan_alternative
+from executive.world.model import World, build, sample_perturbation
+
+__all__ = ["RunResult", "behaviour_failure", "execute_plan", "run_alternative"]
+
+Status = py_trees.common.Status
+
+
+@dataclass
+class RunResult:
+    """What happened when one alternative ran (or failed to plan)."""
+
+    alternative: str
+    outcome: str  # "success" | "failed" | "planning_failed" | "timeout"
+    failure: Failure | None = None
+    message: str = ""
+    plan_s: float = 0.0  # wall time to plan every step
+    planned_duration_s: float = 0.0  # sum of the trajectories' durations
+    sim_time_s: float = 0.0
+    wall_s: float = 0.0  # wall time of the execution loop
+    physics_wall_s: float = 0.0  # of which stepping physics (+ detectors + servo targets)
+    ticks: int = 0
+    max_tick_s: float = 0.0
+    statuses: list[str] = field(default_factory=list)  # root status after each tick, run-length encoded
+    placement_error_m: float | None = None
+
+    @property
+    def success(self) -> bool:
+        return self.outcome == "success"
+
+    @property
+    def real_time_factor(self) -> float:
+        return self.sim_time_s / self.wall_s if self.wall_s > 0 else float("nan")
+
+
+def execute_plan(
+    plan: AlternativePlan,
+    truth: World,
+    task: Task,
+    control_dt: float = 0.02,
+    time_limit_s: float | None = None,
+) -> RunResult:
+    """Tick the plan's subtree against the truth world until it finishes; check the placement.
+
+    The detectors decide every failure as in a mission; the closest call (a report, never a
+    failure) is not computed: nothing reads it from a batch run.
+    """
+    detector = FailureDetector(truth, distance_stride=0)
+    robot = SimulatedRobot(truth, control_dt=control_dt, detector=detector)
+    install(robot)
+    root = task_kind(task.kind).subtree(plan)
+    tree = py_trees.trees.BehaviourTree(root)
+    tree.setup()
+    limit = time_limit_s if time_limit_s is not None else plan.duration + 10.0
+    result = RunResult(plan.name, "timeout", planned_duration_s=plan.duration)
+    start = time.perf_counter()
+    last = None
+    while truth.data.time < limit:
+        t0 = time.perf_counter()
+        tree.tick()
+        result.max_tick_s = max(result.max_tick_s, time.perf_counter() - t0)
+        result.ticks += 1
+        status = root.status
+        if status != last:
+            result.statuses.append(status.name)
+            last = status
+        if status != Status.RUNNING:
+            break
+        robot.advance()
+    result.wall_s = time.perf_counter() - start
+    result.physics_wall_s = robot.stats.physics_wall_s
+    result.sim_time_s = float(truth.data.time)
+    if root.status == Status.SUCCESS:
+        _verify(result, task, truth, robot.detector)
+    elif root.status == Status.FAILURE:
+        tip = root.tip()
+        feedback = tip.feedback_message if tip else ""
+        result.failure = robot.failure or behaviour_failure(feedback, float(truth.data.time))
+        result.outcome = "failed"
+        result.message = f"{tip.name if tip else plan.name}: {feedback}"
+    else:
+        robot.hold()
+        tree.interrupt()
+        result.message = f"not finished after {limit:.1f} s of simulated time"
+    tree.shutdown()
+    return result
+
+
+def _verify(result: RunResult, task: Task, truth: World, detector: FailureDetector) -> None:
+    """The task kind's check of a subtree that succeeded (a transfer: the object at its target)."""
+    verdict = task_kind(task.kind).verify(task, truth, detector)
+    to = getattr(task, "to", None)
+    if to is not None and task.object:
+        pos = truth.data.xpos[truth.ids.object_bodies[task.object]]
+        result.placement_error_m = float(np.hypot(pos[0] - to[0], pos[1] - to[1]))
+    if verdict is None or verdict.ok:
+        done = (
+            f"{task.object} placed at the target" if verdict is not None and verdict.event == "placed" else ""
+        )
+        result.outcome, result.message = "success", done or f"{task.label()}: done"
+    else:
+        result.outcome, result.failure = "failed", verdict.failure
+        result.message = str(verdict.fields.get("detail", ""))
+
+
+def behaviour_failure(feedback: str, time_s: float) -> Failure | None:
+    """The failure a behaviour reported itself (its message starts with the mode, ``drop: ...``).
+
+    None when the message names no failure mode (e.g. a hand that lost its track).
+    """
+    mode = feedback.split(":", 1)[0] if ":" in feedback else ""
+    if mode in get_args(FailureMode):
+        return Failure(cast(FailureMode, mode), feedback, time_s)
+    return None
+
+
+def run_alternative(
+    scenario: Scenario,
+    alternative: str,
+    *,
+    task_index: int = 0,
+    exact: bool = False,
+    seed: int | None = None,
+    control_dt: float = 0.02,
+) -> RunResult:
+    """Plan ``alternative`` of a task on the estimate and execute it in a (sampled) truth world."""
+    task = scenario.mission[task_index]
+    estimate = build(scenario)
+    if exact:
+        truth = build(scenario)
+    else:
+        rng = np.random.default_rng(scenario.trials.seed if seed is None else seed)
+        truth = build(scenario, sample_perturbation(scenario, rng), kind="truth")
+    t0 = time.perf_counter()
+    try:
+        plan = plan_alternative(Planner(estimate), estimate, task, alternative)
+    except PlanningError as exc:
+        return RunResult(alternative, "planning_failed", message=str(exc), plan_s=time.perf_counter() - t0)
+    plan_s = time.perf_counter() - t0
+    result = execute_plan(plan, truth, task, control_dt=control_dt)
+    result.plan_s = plan_s
+    return result

@@ -1,0 +1,144 @@
+"""What a task is and what a task kind must provide.
+
+A mission is a sequence of :class:`Task` values, each read from its YAML block by a
+:class:`TaskKind` (``transfer``, ``pick``, ``place``, ``push``, ``press``, or a
+third party's). The kind says which alternatives exist for the robot and world at
+hand (:meth:`TaskKind.alternatives`), turns one into planner steps
+(:meth:`TaskKind.steps`) and a behaviour subtree (:meth:`TaskKind.subtree`), and
+checks afterwards that the task did what it asked (:meth:`TaskKind.verify`).
+
+Register a kind with :func:`executive.tasks.registry.register`, an entry point in
+the group ``executive.task_kinds``, or ``kind: package.module:Class`` in the YAML.
+"""
+
+from __future__ import annotations
+
+import abc
+import dataclasses
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, ClassVar
+
+if TYPE_CHECKING:
+    import py_trees
+
+    from executive.monitoring.detectors import FailureDetector
+    from executive.scenario.types import SceneConfig
+    from executive.scenario.yaml_nodes import Node
+    from executive.tasks.steps import AlternativePlan, CompositionConfig, Step
+    from executive.world.model import World
+
+__all__ = ["Alternative", "Task", "TaskKind", "Verdict"]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Task:
+    """One task of a mission. Subclasses are frozen dataclasses with their kind's fields.
+
+    ``object``: the scene object the task acts on ("" for none, e.g. a press);
+    ``alternatives``: the names the scenario allows (empty: every alternative the kind offers).
+    """
+
+    kind: ClassVar[str] = ""
+    object: str
+    alternatives: tuple[str, ...] = ()
+
+    def label(self) -> str:
+        """One line for logs and tables, e.g. ``transfer book to (0.52, -0.26)``."""
+        return f"{self.kind} {self.object}".strip()
+
+    def restricted(self, names: tuple[str, ...]) -> Task:
+        """The same task allowing only ``names`` (a re-plan without the alternatives tried)."""
+        return dataclasses.replace(self, alternatives=names)
+
+
+@dataclass(frozen=True)
+class Alternative:
+    """One way to do a task; ``unsupported`` says why it cannot be done here ("" if it can)."""
+
+    name: str
+    unsupported: str = ""
+
+
+@dataclass(frozen=True)
+class Verdict:
+    """A kind's check of a finished task: ``ok``, the audit line's event and its fields.
+
+    Fields of a failure: ``mode`` (``misplaced``, ``drop``, ...), ``detail``, ``behaviour``, ``time``.
+    """
+
+    ok: bool
+    event: str
+    fields: dict[str, Any]
+    failure: Any = None  # the detector's Failure behind a failed check, if it gave one
+
+
+class TaskKind(abc.ABC):
+    """A kind of task: its YAML block, its alternatives, their steps and subtrees.
+
+    Subclasses set ``name`` (the YAML key) and ``alternative_names`` (every name an
+    alternative of this kind can have, documented and stable), and implement
+    :meth:`read`, :meth:`offered` and :meth:`steps`.
+    """
+
+    name: ClassVar[str] = ""
+    alternative_names: ClassVar[tuple[str, ...]] = ()
+
+    @abc.abstractmethod
+    def read(self, node: Node, scene: SceneConfig) -> Task:
+        """The task in ``node`` (the block under the kind's key); errors name the key path.
+
+        Raises:
+            ScenarioError: through ``node.fail``, naming what is wrong and where.
+        """
+
+    @abc.abstractmethod
+    def offered(self, task: Task, world: World) -> list[Alternative]:
+        """Every alternative this kind offers for ``task`` on this robot, in this world's state."""
+
+    @abc.abstractmethod
+    def steps(self, task: Task, world: World, alternative: str, config: CompositionConfig) -> list[Step]:
+        """The steps of ``alternative`` with hand targets from the estimate ``world``.
+
+        Raises:
+            PlanningError: the alternative cannot be laid out (named reason).
+        """
+
+    def read_alternatives(self, node: Node, default: tuple[str, ...] = ()) -> tuple[str, ...]:
+        """The block's optional ``alternatives`` (of :attr:`alternative_names`), else ``default``."""
+        from executive.scenario.scene import read_alternatives
+
+        found = node.opt("alternatives")
+        return read_alternatives(found, self.alternative_names) if found is not None else default
+
+    def alternatives(self, task: Task, world: World) -> list[Alternative]:
+        """The alternatives to assess: those offered that the task allows, in the task's order.
+
+        An alternative the robot's profile declares unsupported comes back with that reason.
+        """
+        offered = {a.name: a for a in self.offered(task, world)}
+        names = task.alternatives or tuple(offered)
+        unsupported = world.profile.unsupported_alternatives
+        out = []
+        for name in names:
+            alt = offered.get(name, Alternative(name, f"{self.name} does not offer '{name}' here"))
+            if not alt.unsupported and name in unsupported:
+                alt = Alternative(name, f"unsupported by robot '{world.profile.name}': {unsupported[name]}")
+            out.append(alt)
+        return out
+
+    def subtree(self, plan: AlternativePlan, *, guard: bool = False) -> py_trees.behaviour.Behaviour:
+        """The alternative's behaviour subtree (default: one behaviour per step, in order)."""
+        from executive.tasks.steps import build_subtree
+
+        return build_subtree(plan, guard=guard)
+
+    def verify(self, task: Task, world: World, detector: FailureDetector) -> Verdict | None:
+        """After the subtree succeeded, did the task do what it asked? (None: nothing to check.)
+
+        ``world`` is the estimate (the scene as planned); ``detector`` watches the robot's world.
+        """
+        return None
+
+    def moved_objects(self, task: Task) -> tuple[str, ...]:
+        """The objects this task may move (their poses are observed again afterwards)."""
+        return (task.object,) if task.object else ()

@@ -1,0 +1,92 @@
+"""Hand targets for top-down grasps: the frames a task kind lays its steps out in.
+
+:class:`HandFrames` knows the robot's home hand poses, its base and heading, and
+which of the two ways to close across an object each hand prefers (its profile's
+``closing_yaw``, e.g. a hand with a thumb on one side such as the G1's Dex3, else
+the one nearer its home pose's), and makes :class:`HandTarget` values from a
+point and the yaw of the object the jaws close across.
+"""
+
+from __future__ import annotations
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from executive.planning.planner import HandTarget
+from executive.planning.types import site_quat
+from executive.world.model import World
+
+__all__ = ["HandFrames", "top_down_quat", "yaw_of"]
+
+FloatArray = NDArray[np.float64]
+UP = np.array([0.0, 0.0, 1.0])
+
+
+def top_down_quat(yaw: float) -> FloatArray:
+    """Hand site frame with +z down and +y (closing) along the horizontal direction at ``yaw``."""
+    y_axis = np.array([np.cos(yaw), np.sin(yaw), 0.0])
+    z_axis = np.array([0.0, 0.0, -1.0])
+    x_axis = np.cross(y_axis, z_axis)
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.column_stack([x_axis, y_axis, z_axis]).ravel())
+    return quat
+
+
+def yaw_of(quat: FloatArray) -> float:
+    """The z-y-x Euler yaw of a unit quaternion (w x y z)."""
+    w, x, y, z = quat
+    return float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+
+
+class HandFrames:
+    """Hand targets in one world: home poses, the body's midline, preferred closing directions.
+
+    Args:
+        world: the estimate world (its home keyframe gives the home hand poses and the base).
+    """
+
+    def __init__(self, world: World) -> None:
+        self.world = world
+        data = mujoco.MjData(world.model)
+        mujoco.mj_resetDataKeyframe(world.model, data, world.ids.keyframe)
+        mujoco.mj_kinematics(world.model, data)
+        self.home = {
+            side: HandTarget(side, data.site_xpos[site].copy(), site_quat(data, site))
+            for side, site in world.ids.hand_sites.items()
+        }
+        mat = data.xmat[world.ids.base_body]
+        self.base = data.xpos[world.ids.base_body].copy()
+        self.heading = float(np.arctan2(mat[3], mat[0]))  # yaw of the base's forward (x) axis
+
+    def side_of_body(self, point: FloatArray) -> float:
+        """+1 left of the robot's midline, -1 right of it."""
+        left_of_base = np.array([-np.sin(self.heading), np.cos(self.heading), 0.0])
+        return 1.0 if float(np.dot(np.asarray(point) - self.base, left_of_base)) >= 0.0 else -1.0
+
+    def closing_near_home(self, side: str, hand_yaw: float) -> float:
+        """Of the two closing directions across an object at ``hand_yaw``, the one ``side`` prefers."""
+        preferred = self.world.profile.arms[side].hand.closing_yaw_deg
+        if preferred is None:
+            mat = np.zeros(9)
+            mujoco.mju_quat2Mat(mat, self.home[side].quat)
+            want = float(np.arctan2(mat[4], mat[1]))  # yaw of the home frame's y (closing) axis
+        else:
+            want = self.heading + float(np.radians(preferred))
+        closing = hand_yaw + np.pi / 2
+        return closing + np.pi if np.cos(closing - want) < 0 else closing
+
+    def target(
+        self, side: str, point: FloatArray, hand_yaw: float, grasp_yaw: float | None = None
+    ) -> HandTarget:
+        """Top-down hand target whose jaws close across an object at ``hand_yaw``.
+
+        ``grasp_yaw``: the object's yaw when this hand grasped it. A hand that holds (or has just
+        released) an object turns it with itself, so its closing direction is the grasp's
+        turned by the object's change of yaw, not whichever of the two is nearer home.
+        """
+        if grasp_yaw is None:
+            closing = self.closing_near_home(side, hand_yaw)
+        else:
+            closing = self.closing_near_home(side, grasp_yaw) + (hand_yaw - grasp_yaw)
+        return HandTarget(side, np.asarray(point, dtype=float), top_down_quat(closing))

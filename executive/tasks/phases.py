@@ -1,0 +1,137 @@
+"""The phases alternatives are composed of: pick up, carry along a lane, put down.
+
+Each returns the :class:`Step` list of one hand for one phase; a kind strings phases
+together (``transfer`` = pick + lane carry + place; ``pick`` = pick + hold;
+``place`` = place from the holding hand). Grasps are top-down, the jaws closing
+across the object's local y extent (:class:`executive.tasks.hands.HandFrames`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from executive.scenario.types import Body, SceneConfig
+from executive.tasks.hands import UP, HandFrames
+from executive.tasks.steps import CompositionConfig, Step
+
+__all__ = ["carry_lane_front", "grasp_height", "lane_carry", "pick", "place"]
+
+FloatArray = NDArray[np.float64]
+
+
+def grasp_height(body: Body, centre_z: float, cfg: CompositionConfig) -> float:
+    """Height of the hand site for a top-down grasp of ``body`` with its centre at ``centre_z``."""
+    return max(centre_z, centre_z + body.half_height() - cfg.grip_depth)
+
+
+def pick(
+    h: HandFrames, side: str, obj: str, grasp: FloatArray, yaw: float, cfg: CompositionConfig
+) -> list[Step]:
+    """Over the object, down onto it (the open jaws may touch it), close, lift it ``lift_height``."""
+    return [
+        Step("move", f"{side}.pre_grasp", side, (h.target(side, grasp + cfg.approach_height * UP, yaw),)),
+        Step("move", f"{side}.approach", side, (h.target(side, grasp, yaw),), allow_contact=(obj,)),
+        Step("grasp", f"{side}.grasp", side, obj=obj),
+        Step(
+            "lift",
+            f"{side}.lift",
+            side,
+            (h.target(side, grasp + cfg.lift_height * UP, yaw, yaw),),
+            carried=(side, obj),
+        ),
+    ]
+
+
+def place(
+    h: HandFrames,
+    side: str,
+    obj: str,
+    point: FloatArray,
+    place_yaw: float,
+    grasp_yaw: float,
+    cfg: CompositionConfig,
+    back: tuple[Step, ...] = (),
+) -> list[Step]:
+    """Over the place, down, open, up, (``back``: moves before turning home), home clear of the object."""
+    above = point + cfg.approach_height * UP
+    carried = (side, obj)
+    return [
+        Step(
+            "carry",
+            f"{side}.pre_place",
+            side,
+            (h.target(side, above, place_yaw, grasp_yaw),),
+            carried=carried,
+        ),
+        Step(
+            "place",
+            f"{side}.place",
+            side,
+            (h.target(side, point, place_yaw, grasp_yaw),),
+            carried=carried,
+            allow_contact=("table_top",),
+        ),
+        Step("release", f"{side}.release", side, obj=obj),
+        Step(
+            "retreat",
+            f"{side}.retreat",
+            side,
+            (h.target(side, above, place_yaw, grasp_yaw),),
+            allow_contact=(obj,),
+        ),
+        *back,
+        # The way home keeps clear of the object just placed (a hand that rotates back to its
+        # home pose can sweep its fingers into it); brushing it is tolerated (obj).
+        Step("home", f"{side}.home", side, (h.home[side],), obj=obj),
+    ]
+
+
+def carry_lane_front(
+    scene: SceneConfig, y_span: tuple[float, float], reach: float, base_x: float, default: float
+) -> float:
+    """The x of the nearest front face among the obstacles a carry across ``y_span`` would pass.
+
+    An obstacle counts when its footprint overlaps the band swept by the carried object
+    (``y_span`` widened by ``reach`` either side) and lies ahead of the robot's base; side walls
+    of an enclosure beside the work area do not. ``default`` when none is in the way.
+    """
+    low, high = min(y_span) - reach, max(y_span) + reach
+    fronts = []
+    for o in scene.obstacles:
+        half_x = o.size[0] / 2 if o.shape == "box" else o.size[0]
+        half_y = o.size[1] / 2 if o.shape == "box" else o.size[0]
+        x, y = o.position[0], o.position[1]
+        if y + half_y < low or y - half_y > high or x + half_x <= base_x:
+            continue
+        fronts.append(x - half_x)
+    return min(fronts, default=default)
+
+
+def lane_carry(
+    h: HandFrames,
+    side: str,
+    obj: str,
+    points: tuple[FloatArray, FloatArray],
+    carry_yaw: float,
+    grasp_yaw: float,
+) -> list[Step]:
+    """Back to the lane, then across the body in it (the object skirting what is in the way)."""
+    lane_in, lane_out = points
+    carried = (side, obj)
+    return [
+        Step(
+            "carry",
+            f"{side}.to_lane",
+            side,
+            (h.target(side, lane_in, carry_yaw, grasp_yaw),),
+            carried=carried,
+        ),
+        Step(
+            "carry",
+            f"{side}.transfer",
+            side,
+            (h.target(side, lane_out, carry_yaw, grasp_yaw),),
+            carried=carried,
+        ),
+    ]

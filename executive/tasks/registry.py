@@ -1,0 +1,107 @@
+"""The registry of task kinds: the built-in ones, installed plug-ins, and dotted paths.
+
+A kind is found by its YAML key (``transfer``) among, in order: kinds registered in
+this process (:func:`register`), the built-in kinds, and entry points in the group
+``executive.task_kinds`` (``name = "package.module:Class"``). A scenario may also name
+a class directly: ``kind: package.module:Class`` in a task block (see
+:func:`resolve`). Kinds are imported only when first asked for.
+"""
+
+from __future__ import annotations
+
+import importlib
+from importlib import metadata
+
+from executive.errors import ExecutiveError
+from executive.tasks.base import TaskKind
+
+__all__ = ["ENTRY_POINT_GROUP", "TaskKindError", "available", "get", "register", "resolve"]
+
+ENTRY_POINT_GROUP = "executive.task_kinds"
+
+#: The kinds that ship with the package, by YAML key.
+BUILT_IN: dict[str, str] = {
+    "transfer": "executive.tasks.transfer:TransferKind",
+    "pick": "executive.tasks.pick_place:PickKind",
+    "place": "executive.tasks.pick_place:PlaceKind",
+    "push": "executive.tasks.push:PushKind",
+    "press": "executive.tasks.press:PressKind",
+}
+
+_registered: dict[str, TaskKind] = {}
+
+
+class TaskKindError(ExecutiveError):
+    """A task kind that cannot be found or loaded (the message says which and why)."""
+
+
+def register(kind: TaskKind | type[TaskKind]) -> TaskKind:
+    """Make ``kind`` available under its ``name`` in this process (replacing one of that name)."""
+    instance = kind() if isinstance(kind, type) else kind
+    if not instance.name:
+        raise TaskKindError(f"task kind {type(instance).__name__} has no name")
+    _registered[instance.name] = instance
+    return instance
+
+
+def _entry_points() -> dict[str, metadata.EntryPoint]:
+    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def available() -> list[str]:
+    """Every kind name that :func:`get` can find, sorted."""
+    built = [k for k in BUILT_IN if _importable(BUILT_IN[k])]
+    return sorted({*_registered, *built, *_entry_points()})
+
+
+def _importable(path: str) -> bool:
+    return importlib.util.find_spec(path.split(":")[0]) is not None
+
+
+def resolve(path: str) -> TaskKind:
+    """The kind at ``package.module:Class`` (imported now).
+
+    Raises:
+        TaskKindError: the module cannot be imported, has no such class, or it is not a TaskKind.
+    """
+    module_name, sep, attr = path.partition(":")
+    if not sep or not module_name or not attr:
+        raise TaskKindError(f"'{path}' is not a dotted path of the form package.module:Class")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as error:
+        raise TaskKindError(f"cannot import '{module_name}' for task kind '{path}': {error}") from None
+    target = getattr(module, attr, None)
+    if target is None:
+        raise TaskKindError(f"module '{module_name}' has no '{attr}' (task kind '{path}')")
+    return _instance(target, path)
+
+
+def _instance(target: object, where: str) -> TaskKind:
+    instance = target() if isinstance(target, type) else target
+    if not isinstance(instance, TaskKind):
+        raise TaskKindError(f"'{where}' is not a TaskKind (a subclass of executive.tasks.base.TaskKind)")
+    return instance
+
+
+def get(name: str) -> TaskKind:
+    """The kind called ``name`` (or at ``package.module:Class``).
+
+    Raises:
+        TaskKindError: no kind of that name; the message lists those available.
+    """
+    if ":" in name:
+        return resolve(name)
+    if name in _registered:
+        return _registered[name]
+    if name in BUILT_IN:
+        return register(resolve(BUILT_IN[name]))
+    entry = _entry_points().get(name)
+    if entry is None:
+        raise TaskKindError(f"unknown task kind '{name}'; kinds: {', '.join(available())}")
+    try:
+        target = entry.load()
+    except Exception as error:  # a plug-in's own import error, reported with its name
+        problem = f"task kind '{name}' (entry point {entry.value}) fails to load: {error}"
+        raise TaskKindError(problem) from None
+    return register(_instance(target, f"entry point {entry.value}"))

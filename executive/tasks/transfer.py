@@ -1,0 +1,180 @@
+"""The ``transfer`` task kind: move an object to a place on the table (or on something on it).
+
+Alternatives (names stable; Long et al. 2018, section "Total risk"):
+
+* ``left``, ``right``: pick and place with one hand, carried across the body in a lane
+  in front of what the carry would pass;
+* ``left_to_right``, ``right_to_left``: pick with the first hand, hand over in front of
+  the body, place with the second (only for an object a half turn leaves unchanged);
+
+A one-arm robot offers its one hand; a robot's profile may declare any of them unsupported.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from executive.planning.planner import PlanningError
+from executive.scenario.types import Body, SceneConfig
+from executive.scenario.yaml_nodes import Node
+from executive.tasks import handover as handover_steps
+from executive.tasks.base import Alternative, Task, TaskKind, Verdict
+from executive.tasks.hands import UP, HandFrames, yaw_of
+from executive.tasks.phases import carry_lane_front, grasp_height, lane_carry, pick, place
+from executive.tasks.steps import CompositionConfig, Step
+from executive.world.model import World
+
+__all__ = ["HANDOVERS", "ONE_HAND", "TransferKind", "TransferTask", "transfer_steps"]
+
+ONE_HAND = ("left", "right")
+HANDOVERS = ("left_to_right", "right_to_left")
+
+
+@dataclass(frozen=True, kw_only=True)
+class TransferTask(Task):
+    """Move ``object`` to ``to`` (centre x, y[, z]); z None means resting on the table."""
+
+    kind = "transfer"
+    # x, y in [-10, 10], z in [0, 5] (m): over the table, within the robot's reach, the object there
+    # clear of obstacles and other objects; with z it must rest on the table or on something on it
+    to: tuple[float, float, float | None]
+    to_yaw_rad: float | None = None  # None: keep the object's yaw; [-360, 360] deg in YAML
+
+    def label(self) -> str:
+        to = ", ".join(f"{v:.2f}" for v in self.to if v is not None)
+        return f"transfer {self.object} to ({to})"
+
+
+@dataclass(frozen=True)
+class Placement:
+    """Where an object goes: its centre, its yaw, the hand site's height above its centre."""
+
+    centre: np.ndarray
+    yaw: float
+    site_above_centre: float
+
+
+def target_placement(
+    world: World,
+    body: Body,
+    to: tuple[float, float, float | None],
+    yaw: float | None,
+    site_above_centre: float,
+) -> Placement:
+    """The placement of ``body`` at ``to`` (z None: resting on the table), yaw None: ``body``'s current."""
+    scene = world.scenario.scene
+    z = to[2] if to[2] is not None else scene.table.height + body.half_height()
+    _, quat = world.object_pose(body.name)
+    return Placement(np.array([to[0], to[1], z]), yaw if yaw is not None else yaw_of(quat), site_above_centre)
+
+
+class TransferKind(TaskKind):
+    """Move an object to a target pose: one hand, or two with a handover."""
+
+    name = "transfer"
+    alternative_names = (*ONE_HAND, *HANDOVERS)
+    default_alternatives = ("left", "right", "left_to_right")
+
+    def read(self, node: Node, scene: SceneConfig) -> Task:
+        """``transfer: {object, to: [x, y(, z)], to_yaw (deg), alternatives}``."""
+        from executive.scenario.scene import read_target
+
+        node.check_keys(("object", "to"), ("to_yaw", "alternatives"))
+        name, to, yaw = read_target(node, scene)
+        return TransferTask(
+            object=name,
+            to=to,
+            to_yaw_rad=yaw,
+            alternatives=self.read_alternatives(node, self.default_alternatives),
+        )
+
+    def offered(self, task: Task, world: World) -> list[Alternative]:
+        sides = world.profile.sides
+        out = [Alternative(s) for s in ONE_HAND if s in sides]
+        for name in HANDOVERS:
+            missing = [s for s in name.split("_to_") if s not in sides]
+            reason = f"robot '{world.profile.name}' has no {' and no '.join(missing)} arm" if missing else ""
+            out.append(Alternative(name, reason))
+        return out
+
+    def steps(self, task: Task, world: World, alternative: str, config: CompositionConfig) -> list[Step]:
+        assert isinstance(task, TransferTask)
+        if alternative in ONE_HAND:
+            return one_hand_steps(world, task, alternative, config)
+        if alternative in HANDOVERS:
+            giver, receiver = HANDOVERS_SIDES[alternative]
+            return handover_steps.transfer(world, task, giver, receiver, config)
+        raise PlanningError(
+            alternative, None, 0.0, 0.0, 0, reason=f"transfer has no alternative '{alternative}'"
+        )
+
+    def verify(self, task: Task, world: World, detector: object) -> Verdict | None:
+        assert isinstance(task, TransferTask)
+        return placed_verdict(world, detector, task.object, task.to, task.to_yaw_rad)
+
+
+HANDOVERS_SIDES = {"left_to_right": ("left", "right"), "right_to_left": ("right", "left")}
+
+
+def placed_verdict(
+    world: World, detector: object, obj: str, to: tuple[float, float, float | None], to_yaw: float | None
+) -> Verdict | None:
+    """The detector's verdict on ``obj`` resting at ``to`` (None: no detector that can tell)."""
+    check = getattr(detector, "check_placed", None)
+    if check is None:
+        return None
+    body = next(b for b in world.scenario.scene.objects if b.name == obj)
+    yaw = to_yaw if to_yaw is not None else body.orientation_rad[2]
+    found = check(obj, (to[0], to[1]), yaw, body.yaw_symmetry)
+    if found is None:
+        return Verdict(True, "placed", {"object": obj, "target": list(to)})
+    fields = {"mode": found.mode, "detail": found.detail, "behaviour": "placement", "time": found.time}
+    return Verdict(False, "failure", fields, found)
+
+
+def one_hand_steps(world: World, task: TransferTask, side: str, cfg: CompositionConfig) -> list[Step]:
+    """Pick, carry across the body in the lane in front of what is in the way, place, home.
+
+    Straight, simple hand paths: up, back to the lane, across the body in that lane (the
+    carried object skirting the obstacles' front at ``obstacle_clearance``: the one-arm
+    alternatives' risk), forward over the place, down.
+    """
+    h = HandFrames(world)
+    body = next(b for b in world.scenario.scene.objects if b.name == task.object)
+    pos, quat = world.object_pose(task.object)
+    yaw = yaw_of(quat)
+    grasp = np.array([pos[0], pos[1], grasp_height(body, pos[2], cfg)])
+    target = target_placement(world, body, task.to, task.to_yaw_rad, grasp[2] - pos[2])
+    place_at = target.centre + target.site_above_centre * UP
+    carry_z = max(grasp[2] + cfg.lift_height, place_at[2] + cfg.approach_height)
+    length = body.size[0] if body.shape == "box" else 2 * body.size[0]
+    front_x = carry_lane_front(
+        world.scenario.scene,
+        (pos[1], target.centre[1]),
+        length / 2 + cfg.obstacle_clearance,
+        h.base[0],
+        pos[0],
+    )
+    lane_x = min(front_x - cfg.obstacle_clearance - length / 2, grasp[0], place_at[0])
+    lane = (np.array([lane_x, grasp[1], carry_z]), np.array([lane_x, place_at[1], carry_z]))
+    # A hand that placed the object across the body first goes back along the lane to its own
+    # side, as it is (the retreat's orientation), and only then turns home: the straight way
+    # home from across the body swings the arm across the body's front while the hand turns.
+    back: tuple[Step, ...] = ()
+    if world.profile.return_along_lane and h.side_of_body(place_at) != h.side_of_body(h.home[side].position):
+        back_point = np.array([lane_x, h.home[side].position[1], carry_z])
+        back = (Step("move", f"{side}.back", side, (h.target(side, back_point, target.yaw, yaw),)),)
+    return [
+        *pick(h, side, task.object, grasp, yaw, cfg),
+        *lane_carry(h, side, task.object, lane, (yaw + target.yaw) / 2, yaw),
+        *place(h, side, task.object, place_at, target.yaw, yaw, cfg, back),
+    ]
+
+
+def transfer_steps(
+    world: World, task: Task, alternative: str, config: CompositionConfig | None = None
+) -> list[Step]:
+    """The steps of one alternative of a transfer task, with targets from the estimate world."""
+    return TransferKind().steps(task, world, alternative, config or CompositionConfig())

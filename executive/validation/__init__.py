@@ -1,0 +1,1 @@
+"""Checking predictions against physics: campaigns, statistics and the fidelity suite."""

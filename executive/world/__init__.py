@@ -1,0 +1,1 @@
+"""The MuJoCo world built from a scenario (estimate or truth), and the geometry of standing in it."""
