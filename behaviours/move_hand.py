@@ -8,8 +8,7 @@ import numpy as np
 import py_trees
 
 from behaviours.robot_access import RobotBehaviour
-from executive.execution import SimulatedRobot
-from executive.planning import Trajectory
+from executive.planning.planner import Trajectory
 
 __all__ = ["Carry", "Home", "Lift", "MoveHand", "Place", "Retreat"]
 
@@ -29,9 +28,9 @@ class MoveHand(RobotBehaviour):
     (:meth:`Trajectory.sample_many`, one vectorised call instead of two samples per tick); a
     tick whose trajectory time is not the next sampled one (a host's robot whose clock does
     not advance by exactly one period per tick) samples afresh from its own time. On the bundled
-    physics (:class:`executive.execution.SimulatedRobot`) the legs' static load of each sampled
+    physics (:class:`executive.robot.simulated.SimulatedRobot`) the legs' static load of each sampled
     target (the leg servos' feed-forward) is computed with them, in one batch
-    (:meth:`executive.execution.JointTargetController.leg_loads`).
+    (:meth:`executive.robot.simulated.JointTargetController.leg_loads`).
     """
 
     chunk: int = 25  # control periods sampled ahead (0.5 s at 50 Hz)
@@ -113,10 +112,9 @@ class MoveHand(RobotBehaviour):
             times = t + dt * np.arange(self.chunk + 1, dtype=np.float64)
             self._ahead_t = times[:-1]
             self._ahead_q = self.trajectory.sample_many(times)
-            robot = self._robot
-            self._ahead_load = (
-                robot.controller.leg_loads(self._ahead_q[:-1]) if isinstance(robot, SimulatedRobot) else None
-            )
+            # The bundled simulation's servos feed the legs' static load forward; a host's robot has none.
+            leg_loads = getattr(getattr(self._robot, "controller", None), "leg_loads", None)
+            self._ahead_load = leg_loads(self._ahead_q[:-1]) if leg_loads is not None else None
             i = 0
         self._ahead_i = i + 1
         q = self._ahead_q[i]
