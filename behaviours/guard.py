@@ -3,7 +3,7 @@
 ``RiskGuard(child, ...)`` wraps a trajectory-following behaviour
 (:class:`behaviours.move_hand.MoveHand` and its kinds). On each tick, after the
 child has sent this period's targets, it asks the
-:class:`executive.live_risk.LiveRiskMonitor` on the blackboard
+:class:`executive.monitoring.live_risk.LiveRiskMonitor` on the blackboard
 (``/executive/live_risk``) for the predicted clearance (measured configuration
 and the next ``lookahead_s`` of planned knots, against the *current* estimate of
 the scene) and the CoM margin over the current foot contacts. When a limit is
@@ -42,7 +42,7 @@ class RiskGuard(py_trees.decorators.Decorator):
     Args:
         child: the motion to guard.
         side, kind, obj, allow_contact: the motion step's hand, kind, task object and
-            planned contacts (:class:`executive.composition.Step`), for the allowances.
+            planned contacts (:class:`executive.tasks.steps.Step`), for the allowances.
         every: check every ``every``-th tick (1: every tick).
     """
 
@@ -68,7 +68,7 @@ class RiskGuard(py_trees.decorators.Decorator):
         self._ticks = 0
         self._watch: Any = None  # the monitor of the running motion (set in initialise)
         self._robot: Any = None
-        self.last_verdict: Any = None  # executive.live_risk.GuardVerdict of the latest check
+        self.last_verdict: Any = None  # executive.monitoring.live_risk.GuardVerdict of the latest check
         self.tripped: Any = None  # the verdict that stopped the motion, if any
 
     def _monitor(self) -> Any:

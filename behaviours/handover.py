@@ -6,7 +6,7 @@ import py_trees
 
 from behaviours.gripper import Grasp, Release
 from behaviours.move_hand import Retreat
-from executive.planning import Trajectory
+from executive.planning.planner import Trajectory
 
 __all__ = ["handover_subtree"]
 

@@ -1,4 +1,4 @@
-"""Grasp geometry as named reasons (executive/planning/grasp_geometry.py).
+"""Grasp geometry as named reasons (executive/tasks/grasp_geometry.py).
 
 References: the gripper's slide positions (``grasp_tolerance``'s jaw opening) against rays cast
 at the model's open hand; the humanoid MJCF's finger numbers; the whole-body IK itself, which
@@ -12,10 +12,10 @@ from pathlib import Path
 import pytest
 
 import executive.tasks.steps as composition
-from executive.planning.grasp_geometry import GraspGeometryError, hand_geometry, min_thickness
 from executive.planning.planner import Planner, PlanningError
 from executive.risk.grasp import grasp_tolerance
 from executive.scenario import load, loads
+from executive.tasks.grasp_geometry import GraspGeometryError, hand_geometry, min_thickness
 from executive.tasks.steps import plan_alternative
 from executive.world.model import World, build
 

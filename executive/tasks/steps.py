@@ -16,9 +16,9 @@ import numpy as np
 import py_trees
 from numpy.typing import NDArray
 
-from executive.planning.grasp_geometry import check_grasp
 from executive.planning.planner import HandTarget, Planner, Trajectory
 from executive.tasks.base import Task
+from executive.tasks.grasp_geometry import check_grasp
 from executive.world.model import World
 
 __all__ = [
@@ -102,7 +102,7 @@ def plan_alternative(
     """Plan every motion step of an alternative in order, each from where the previous ended.
 
     Raises :class:`executive.planning.planner.PlanningError` naming the step that cannot be reached,
-    or (:class:`executive.planning.grasp_geometry.GraspGeometryError`, before any planning) the grasp
+    or (:class:`executive.tasks.grasp_geometry.GraspGeometryError`, before any planning) the grasp
     the hand cannot make: an object wider than the jaw opening, or too thin for the fingers
     to get round it above the table.
     """
@@ -132,7 +132,7 @@ def plan_alternative(
 def check_grasps(world: World, steps: list[Step], table_clearance: float, grip_depth: float) -> None:
     """The grasp geometry of every grasp of an alternative.
 
-    Each is checked with :func:`executive.planning.grasp_geometry.check_grasp`.
+    Each is checked with :func:`executive.tasks.grasp_geometry.check_grasp`.
 
     The first grasp takes the object off the table: its site height above the table top is the
     approach's target; later grasps (a handover) are in the air, checked for width only.
