@@ -6,6 +6,11 @@ Alternatives (names stable; Long et al. 2018, section "Total risk"):
   in front of what the carry would pass;
 * ``left_to_right``, ``right_to_left``: pick with the first hand, hand over in front of
   the body, place with the second (only for an object a half turn leaves unchanged);
+* ``left_regrasp_right``, ``right_regrasp_left``: pick with the first hand, set the object
+  down on a free spot of the table near the midline, let go and go clear; the second hand
+  picks it up there and places it (the way for an object that cannot be handed over:
+  its yaw is never turned; :mod:`executive.tasks.regrasp`). Not in the default list
+  (``TransferKind.default_alternatives``): it plans two one-arm legs, so ask for it by name.
 
 A one-arm robot offers its one hand; a robot's profile may declare any of them unsupported.
 """
@@ -20,16 +25,18 @@ from executive.planning.planner import PlanningError
 from executive.scenario.types import Body, SceneConfig
 from executive.scenario.yaml_nodes import Node
 from executive.tasks import handover as handover_steps
+from executive.tasks import regrasp as regrasp_steps
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict
 from executive.tasks.hands import UP, HandFrames, yaw_of
 from executive.tasks.phases import carry_lane_front, grasp_height, lane_carry, pick, place
 from executive.tasks.steps import CompositionConfig, Step
 from executive.world.model import World
 
-__all__ = ["HANDOVERS", "ONE_HAND", "TransferKind", "TransferTask", "transfer_steps"]
+__all__ = ["HANDOVERS", "ONE_HAND", "REGRASPS", "TransferKind", "TransferTask", "transfer_steps"]
 
 ONE_HAND = ("left", "right")
 HANDOVERS = ("left_to_right", "right_to_left")
+REGRASPS = tuple(regrasp_steps.REGRASPS)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -74,7 +81,7 @@ class TransferKind(TaskKind):
     """Move an object to a target pose: one hand, or two with a handover."""
 
     name = "transfer"
-    alternative_names = (*ONE_HAND, *HANDOVERS)
+    alternative_names = (*ONE_HAND, *HANDOVERS, *REGRASPS)
     default_alternatives = ("left", "right", "left_to_right")
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
@@ -93,8 +100,8 @@ class TransferKind(TaskKind):
     def offered(self, task: Task, world: World) -> list[Alternative]:
         sides = world.profile.sides
         out = [Alternative(s) for s in ONE_HAND if s in sides]
-        for name in HANDOVERS:
-            missing = [s for s in name.split("_to_") if s not in sides]
+        for name in (*HANDOVERS, *REGRASPS):
+            missing = [s for s in HANDOVERS_SIDES.get(name) or regrasp_steps.REGRASPS[name] if s not in sides]
             reason = f"robot '{world.profile.name}' has no {' and no '.join(missing)} arm" if missing else ""
             out.append(Alternative(name, reason))
         return out
@@ -106,6 +113,9 @@ class TransferKind(TaskKind):
         if alternative in HANDOVERS:
             giver, receiver = HANDOVERS_SIDES[alternative]
             return handover_steps.transfer(world, task, giver, receiver, config)
+        if alternative in REGRASPS:
+            first, second = regrasp_steps.REGRASPS[alternative]
+            return regrasp_steps.transfer(world, task, first, second, config)
         raise PlanningError(
             alternative, None, 0.0, 0.0, 0, reason=f"transfer has no alternative '{alternative}'"
         )
