@@ -1,50 +1,9 @@
 """Whole-body motion planning with mink: hands to targets, feet fixed, CoM over the feet.
 
-:meth:`Planner.move` drives one or both hands to target poses from a start
-configuration by differential inverse kinematics (mink's tasks and limits; the QP
-of ``mink.solve_ik``, assembled on the unfrozen dofs and solved with DAQP by
-:class:`~executive.planning.limits.JointBounds`), then re-times the geometric path (see
-:mod:`executive.planning.timing`). Everything runs on the *estimate* world's
-model; the returned qpos index that model.
-
-The QP of every IK step (mink's formulation, ``min ||J dq + e||_W^2`` subject to
-``G dq <= h``, ``A dq = b``):
-
-* tasks: a ``FrameTask`` per named hand site; a ``ComTask`` pulling
-  the CoM xy towards the middle of the support polygon (modest cost: the robot
-  may lean); a ``PostureTask`` towards the keyframe, legs stiffest, then waist,
-  arms softest, except that an idle arm is held at its start joint angles
-  (it moves with the torso, so it cannot wander into it);
-* equality constraints: both feet bodies held at their start pose
-  (``FrameTask`` rows as constraints); finger and object dofs frozen (left out
-  of the QP, which is the same as mink's ``DofFreezingTask``);
-* limits: ``ConfigurationLimit``, ``VelocityLimit`` (the joints' velocity limits;
-  both as bounds on single dofs, see :class:`~executive.planning.limits.JointBounds`),
-  the CoM inside the feet's support polygon shrunk by a margin
-  (:class:`~executive.planning.limits.SupportPolygonLimit`), the robot's safe posture
-  (:mod:`executive.world.posture`: the torso's tilt, :class:`~executive.planning.limits.TiltLimit`,
-  and the pelvis no lower than its limit below standing,
-  :class:`~executive.planning.limits.PelvisHeightLimit`), and collision
-  avoidance (:class:`~executive.planning.limits.GeomPairCollisionLimit`) between
-  each arm (and a carried object) and the table, obstacles and other objects,
-  between the arms, and between the arms and the rest of the body.
-
-A carried object is treated as part of its hand: its free-joint dofs are
-frozen in the QP, its collision Jacobian is taken on the palm, and after every
-IK step and at every knot its pose is set from the hand pose and the relative
-pose it had at the start.
-
-Three additions to plain differential IK keep it reliable:
-
-* via points (:mod:`executive.planning.route`): a hand whose straight way is
-  blocked by an obstacle passes over it (IK alone stops dead in front of it);
-* relaxation: when the hands stall short of the tolerance because the soft
-  posture task holds them back, its cost is scaled down (hard limits stay);
-* feet projection: after each step the feet's second-order drift is removed
-  by a minimum-norm correction with the feet rows as equality constraints.
-
-Types, errors and the configuration live in :mod:`executive.planning.types`
-and are re-exported here.
+:class:`Planner` plans one motion (:meth:`Planner.move`) by differential inverse kinematics on
+the *estimate* world's model and re-times it (:mod:`executive.planning.timing`); the returned
+qpos index that model. Types, errors and the configuration live in
+:mod:`executive.planning.types` and are re-exported here.
 """
 
 from __future__ import annotations
@@ -52,6 +11,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Sequence
+from typing import NamedTuple
 
 import mink
 import mujoco
@@ -103,40 +63,136 @@ FloatArray = NDArray[np.float64]
 _PELVIS_QP_MARGIN = 0.005
 
 
+class _MoveQP(NamedTuple):
+    """One move's IK problem: its tasks, limits and equality constraints (the feet), the collision
+    limit with its pairs' required clearance (m), a carried object's pose relative to its hand,
+    the support polygon, and the posture cost before relaxation with the idle arms' dofs (which
+    relaxation leaves alone)."""
+
+    tasks: list[mink.Task]
+    limits: list[mink.Limit]
+    constraints: list[mink.Task]
+    collisions: GeomPairCollisionLimit
+    required: FloatArray
+    relative: Relative | None
+    polygon: SupportPolygon
+    posture_cost: FloatArray
+    idle_dofs: NDArray[np.bool_]
+
+
 class Planner:
-    """Whole-body differential-IK planner on a world's model (build once, call :meth:`move` often)."""
+    """Whole-body differential-IK planner on a world's model (build once, call :meth:`move` often).
+
+    :meth:`Planner.move` drives one or both hands to target poses from a start
+    configuration by differential inverse kinematics (mink's tasks and limits; the QP
+    of ``mink.solve_ik``, assembled on the unfrozen dofs and solved with DAQP by
+    :class:`~executive.planning.limits.JointBounds`), then re-times the geometric path (see
+    :mod:`executive.planning.timing`). Everything runs on the *estimate* world's
+    model; the returned qpos index that model.
+
+    The QP of every IK step (mink's formulation, ``min ||J dq + e||_W^2`` subject to
+    ``G dq <= h``, ``A dq = b``):
+
+    * tasks: a ``FrameTask`` per named hand site; a ``ComTask`` pulling
+      the CoM xy towards the middle of the support polygon (modest cost: the robot
+      may lean); a ``PostureTask`` towards the keyframe, legs stiffest, then waist,
+      arms softest, except that an idle arm is held at its start joint angles
+      (it moves with the torso, so it cannot wander into it);
+    * equality constraints: both feet bodies held at their start pose
+      (``FrameTask`` rows as constraints); finger and object dofs frozen (left out
+      of the QP, which is the same as mink's ``DofFreezingTask``);
+    * limits: ``ConfigurationLimit``, ``VelocityLimit`` (the joints' velocity limits;
+      both as bounds on single dofs, see :class:`~executive.planning.limits.JointBounds`),
+      the CoM inside the feet's support polygon shrunk by a margin
+      (:class:`~executive.planning.limits.SupportPolygonLimit`), the robot's safe posture
+      (:mod:`executive.world.posture`: the torso's tilt, :class:`~executive.planning.limits.TiltLimit`,
+      and the pelvis no lower than its limit below standing,
+      :class:`~executive.planning.limits.PelvisHeightLimit`), and collision
+      avoidance (:class:`~executive.planning.limits.GeomPairCollisionLimit`) between
+      each arm (and a carried object) and the table, obstacles and other objects,
+      between the arms, and between the arms and the rest of the body.
+
+    A carried object is treated as part of its hand: its free-joint dofs are
+    frozen in the QP, its collision Jacobian is taken on the palm, and after every
+    IK step and at every knot its pose is set from the hand pose and the relative
+    pose it had at the start.
+
+    Three additions to plain differential IK keep it reliable:
+
+    * via points (:mod:`executive.planning.route`): a hand whose straight way is
+      blocked by an obstacle passes over it (IK alone stops dead in front of it);
+    * relaxation: when the hands stall short of the tolerance because the soft
+      posture task holds them back, its cost is scaled down (hard limits stay);
+    * feet projection: after each step the feet's second-order drift is removed
+      by a minimum-norm correction with the feet rows as equality constraints.
+    """
 
     def __init__(self, world: World, config: PlannerConfig | None = None) -> None:
         self.world = world
-        self.config = cfg = config or PlannerConfig()
+        self.config = config or PlannerConfig()
         model = self.model = world.model
         ids = world.ids
         self.sides: tuple[str, ...] = tuple(sorted(ids.hand_sites))
         self.configuration = mink.Configuration(model)
         self._path_lowest = math.inf  # the lowest pelvis height of the last IK path (m)
         self.last_stats: PlanStats | None = None
-
-        jnt = mujoco.mjtJoint
         self.quat_adr = tuple(
-            int(model.jnt_qposadr[j]) + 3 for j in range(model.njnt) if model.jnt_type[j] == jnt.mjJNT_FREE
+            int(model.jnt_qposadr[j]) + 3
+            for j in range(model.njnt)
+            if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE
         )
-        # Robot joint groups (hinge/slide only; the floating base is free).
-        name = self._joint_name
+        legs, waist, arms, others = self._joint_groups()
+        velocity = self._velocities(legs, waist, arms)
+        self._posture_task(legs, waist, arms)
+        frozen = self._frozen_dofs(others)
+        self._frame_tasks(frozen)
+        # The joint range and velocity limits as bounds of the step's QP on the unfrozen dofs.
+        self.joints = JointBounds(model, velocity, frozen)
+        self._safe_posture_limits()
+        self.foot_geoms = [g for s in sorted(ids.foot_geoms) for g in ids.foot_geoms[s]]
+        self._pairs: dict[tuple[tuple[str, str] | None, tuple[str, ...]], list[tuple[int, int]]] = {}
+        # The collision limit of each (carried, allow_contact), with its pairs' required clearance:
+        # both depend on the model and the configuration only, so they are built once.
+        self._limits: dict[
+            tuple[tuple[str, str] | None, tuple[str, ...]], tuple[GeomPairCollisionLimit, FloatArray]
+        ] = {}
+        self._collision_groups()
+
+    # --- setup helpers ----------------------------------------------------------------------
+
+    def _joint_name(self, joint: int) -> str:
+        return str(mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_JOINT, joint))
+
+    def _joint_groups(self) -> tuple[set[str], set[str], set[str], list[int]]:
+        """The robot's joint names by group (legs, waist, arms; hinge/slide only, the floating
+        base is free) and the ids of its other joints (fingers etc.)."""
+        model, world, ids, name = self.model, self.world, self.world.ids, self._joint_name
         legs = {name(model.joint(n).id) for side in world.profile.leg_joints.values() for n in side}
         waist = {name(model.joint(n).id) for n in world.profile.waist_joints}
         arms = {name(j) for side in self.sides for j in ids.arm_joints[side]}
         robot_joints = [
             j
             for j in range(model.njnt)
-            if model.jnt_bodyid[j] in ids.robot_bodies and model.jnt_type[j] != jnt.mjJNT_FREE
+            if model.jnt_bodyid[j] in ids.robot_bodies and model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE
         ]
         others = [j for j in robot_joints if name(j) not in legs | waist | arms]  # fingers etc.
+        return legs, waist, arms, others
+
+    def _velocities(self, legs: set[str], waist: set[str], arms: set[str]) -> dict[str, float]:
+        """Each group's joint velocity limit (rad/s, as configured); sets the timed dofs and
+        their scaled limits. Returns the unscaled limits by joint name."""
+        cfg, model = self.config, self.model
         velocity = {n: cfg.leg_velocity for n in legs} | {n: cfg.waist_velocity for n in waist}
         velocity |= {n: cfg.arm_velocity for n in arms}
         self.timed_dofs = np.array([int(model.jnt_dofadr[model.joint(n).id]) for n in velocity], dtype=int)
         self.timed_limits = np.array([velocity[n] * cfg.velocity_scale for n in velocity])
         self.velocity_limits = {n: v * cfg.velocity_scale for n, v in velocity.items()}
+        return velocity
 
+    def _posture_task(self, legs: set[str], waist: set[str], arms: set[str]) -> None:
+        """The posture task (legs stiffest, then waist, arms softest) and the qpos/dof addresses
+        it holds: the legs and waist, and each arm."""
+        cfg, model, ids = self.config, self.model, self.world.ids
         posture_cost = np.zeros(model.nv)
         for names, cost in (
             (legs, cfg.posture_leg_cost),
@@ -157,10 +213,18 @@ class Planner:
             s: np.array([int(model.jnt_qposadr[j]) for j in ids.arm_joints[s]], dtype=int) for s in self.sides
         }
 
+    def _frozen_dofs(self, others: list[int]) -> list[int]:
+        """Dofs left out of the QP: the robot's other joints' (fingers) and the objects' free joints."""
+        model = self.model
         frozen = [int(model.jnt_dofadr[j]) for j in others]
-        for qadr in ids.object_qpos.values():
+        for qadr in self.world.ids.object_qpos.values():
             joint = int(np.flatnonzero(model.jnt_qposadr == qadr)[0])
             frozen.extend(range(int(model.jnt_dofadr[joint]), int(model.jnt_dofadr[joint]) + 6))
+        return frozen
+
+    def _frame_tasks(self, frozen: list[int]) -> None:
+        """The dof-freezing task, the feet and hand frame tasks and the CoM task."""
+        cfg, model, world, ids = self.config, self.model, self.world, self.world.ids
         self.freeze = mink.DofFreezingTask(model, dof_indices=frozen)
         self.feet = [
             mink.FrameTask(world.profile.feet[s].body, "body", position_cost=1.0, orientation_cost=1.0)
@@ -179,31 +243,19 @@ class Planner:
         # mink's ComTask regulates body 1's subtree: it must be the robot's base.
         if ids.base_body != 1:
             raise PlanningInputError(f"the robot's base must be body 1 of the model, not {ids.base_body}")
-        # The joint range and velocity limits as bounds of the step's QP on the unfrozen dofs.
-        self.joints = JointBounds(model, velocity, frozen)
-        # The safe posture (executive.world.posture): the torso's tilt, and the pelvis no lower than its
-        # limit below standing (a little higher in the QP, as for the balance, so that the
-        # second-order drift of a step and the knots between steps stay inside it).
-        self.posture_limits = world.profile.safe_posture
+
+    def _safe_posture_limits(self) -> None:
+        """The safe posture (executive.world.posture): the torso's tilt, and the pelvis no lower than
+        its limit below standing (a little higher in the QP, as for the balance, so that the
+        second-order drift of a step and the knots between steps stay inside it)."""
+        cfg, model, ids = self.config, self.model, self.world.ids
+        self.posture_limits = self.world.profile.safe_posture
         tilt = min(cfg.max_torso_tilt_deg, self.posture_limits.max_trunk_tilt_deg)
         self.tilt = TiltLimit(model, ids.torso_body, float(np.radians(tilt)))
         self.standing_height = standing_pelvis_height(model, ids.keyframe, ids.base_body)
         self.pelvis_floor = self.standing_height - self.posture_limits.max_pelvis_drop
         self.pelvis = PelvisHeightLimit(model, ids.base_body, self.pelvis_floor + _PELVIS_QP_MARGIN)
         self.base_z_adr = int(model.jnt_qposadr[model.body_jntadr[ids.base_body]]) + 2
-        self.foot_geoms = [g for s in sorted(ids.foot_geoms) for g in ids.foot_geoms[s]]
-        self._pairs: dict[tuple[tuple[str, str] | None, tuple[str, ...]], list[tuple[int, int]]] = {}
-        # The collision limit of each (carried, allow_contact), with its pairs' required clearance:
-        # both depend on the model and the configuration only, so they are built once.
-        self._limits: dict[
-            tuple[tuple[str, str] | None, tuple[str, ...]], tuple[GeomPairCollisionLimit, FloatArray]
-        ] = {}
-        self._collision_groups()
-
-    # --- setup helpers ----------------------------------------------------------------------
-
-    def _joint_name(self, joint: int) -> str:
-        return str(mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_JOINT, joint))
 
     def _collision_groups(self) -> None:
         """Geom groups: each arm's subtree, the rest of the body, and the environment."""
@@ -357,17 +409,73 @@ class Planner:
         self._check_request(q_start, targets, carried)
         conf = self.configuration
         conf.update(np.array(q_start, dtype=float))
-
         goals = self._routes(targets, carried, allow_contact)
-        stage = {side: 0 for side in goals}
-        active = {side: route[0] for side, route in goals.items()}
-        # Posture: the keyframe, except that an idle arm holds its start joint angles (so it
-        # moves with the torso and cannot wander into it).
+        qp = self._move_qp(goals, carried, allow_contact, rest, posture)
+        clearance0 = qp.collisions.distances(conf.data)
+        # What a step may not cut below: the required clearance (or the start distance, when a
+        # pair starts closer), less a slack well inside the knots' check (clearance_tolerance).
+        floor = np.minimum(clearance0, qp.required) - cfg.step_slack
+        path, iterations, ik_time = self._ik_path(name, goals, qp, floor)
+        trajectory = build_trajectory(
+            model,
+            cfg,
+            np.array(path),
+            name,
+            TimedJoints(self.timed_dofs, self.timed_limits),
+            Frames(dict(ids.hand_sites), ids.base_body, self.quat_adr),
+            carried,
+            qp.relative,
+            qp.polygon,
+            qp.collisions,
+            np.minimum(clearance0, qp.required),
+        )
+        if posture:
+            self._check_posture(trajectory)
+        self.last_stats = PlanStats(
+            name, iterations, ik_time, time.perf_counter() - started, len(trajectory.times)
+        )
+        return trajectory
+
+    def _move_qp(
+        self,
+        goals: dict[str, list[mink.SE3]],
+        carried: tuple[str, str] | None,
+        allow_contact: Sequence[str],
+        rest: bool,
+        posture: bool,
+    ) -> _MoveQP:
+        """Set a move's tasks at the current configuration and gather its QP (see the class doc)."""
+        conf, model = self.configuration, self.model
+        tasks, posture_cost, idle_dofs = self._set_tasks(goals, rest)
+        for foot in self.feet:
+            foot.set_target_from_configuration(conf)
+        polygon = SupportPolygon.from_feet(model, conf.data, self.foot_geoms)
+        self.com.set_target(np.array([*polygon.centre, 0.0]))
+        attach, relative = self._attachment(carried)
+        collisions, required = self._collision_limit(carried, allow_contact, attach)
+        # Keep a small extra margin in the QP so that interpolated knots stay inside the checked one.
+        margin = self.config.support_margin + 0.002
+        balance = SupportPolygonLimit(model, self.world.ids.base_body, polygon, margin)
+        limits: list[mink.Limit] = [self.tilt, balance, collisions]
+        if posture:
+            limits.insert(1, self.pelvis)
+        constraints: list[mink.Task] = list(self.feet)
+        return _MoveQP(
+            tasks, limits, constraints, collisions, required, relative, polygon, posture_cost, idle_dofs
+        )
+
+    def _set_tasks(
+        self, goals: dict[str, list[mink.SE3]], rest: bool
+    ) -> tuple[list[mink.Task], FloatArray, NDArray[np.bool_]]:
+        """Point each moving hand's task at its first goal and the posture task at the keyframe,
+        an idle arm held at its start joint angles (so it moves with the torso and cannot wander
+        into it). Returns the tasks, the posture cost and the idle arms' dofs."""
+        cfg, conf = self.config, self.configuration
         posture_target = self.world.home_qpos()
         if cfg.hold_body and not rest:
             posture_target[self.body_qadr] = conf.q[self.body_qadr]
         posture_cost = self.posture_cost.copy()
-        idle_dofs = np.zeros(model.nv, dtype=bool)
+        idle_dofs = np.zeros(self.model.nv, dtype=bool)
         tasks: list[mink.Task] = [self.com, self.posture]
         for side in self.sides:
             if side in goals:
@@ -379,31 +487,38 @@ class Planner:
                 idle_dofs[self.arm_dofs[side]] = True
         self.posture.set_target(posture_target)
         self.posture.set_cost(posture_cost)
-        for foot in self.feet:
-            foot.set_target_from_configuration(conf)
-        polygon = SupportPolygon.from_feet(model, conf.data, self.foot_geoms)
-        self.com.set_target(np.array([*polygon.centre, 0.0]))
+        return tasks, posture_cost, idle_dofs
 
+    def _attachment(self, carried: tuple[str, str] | None) -> tuple[dict[int, int], Relative | None]:
+        """A carried object's geom -> its hand's body, and its pose relative to the hand site now."""
         attach: dict[int, int] = {}
-        relative: Relative | None = None
-        if carried is not None:
-            side, obj = carried
-            hand_body = int(model.site_bodyid[ids.hand_sites[side]])
-            attach[ids.object_geoms[obj]] = hand_body
-            relative = (
-                ids.hand_sites[side],
-                ids.object_bodies[obj],
-                ids.object_qpos[obj],
-                site_pose(conf.data, ids.hand_sites[side]).inverse()
-                @ body_pose(conf.data, ids.object_bodies[obj]),
-            )
+        if carried is None:
+            return attach, None
+        model, ids, data = self.model, self.world.ids, self.configuration.data
+        side, obj = carried
+        hand_body = int(model.site_bodyid[ids.hand_sites[side]])
+        attach[ids.object_geoms[obj]] = hand_body
+        relative = (
+            ids.hand_sites[side],
+            ids.object_bodies[obj],
+            ids.object_qpos[obj],
+            site_pose(data, ids.hand_sites[side]).inverse() @ body_pose(data, ids.object_bodies[obj]),
+        )
+        return attach, relative
+
+    def _collision_limit(
+        self, carried: tuple[str, str] | None, allow_contact: Sequence[str], attach: dict[int, int]
+    ) -> tuple[GeomPairCollisionLimit, FloatArray]:
+        """The collision limit of (carried, allow_contact) and its pairs' required clearance (m),
+        built on first use and kept (both depend on the model and the request only)."""
         key = (carried, tuple(allow_contact))
         if key not in self._limits:
+            cfg = self.config
             pairs = self.collision_pairs(carried, allow_contact)
             required = self.required_clearance(pairs)
             self._limits[key] = (
                 GeomPairCollisionLimit(
-                    model,
+                    self.model,
                     pairs,
                     # As for the balance: a little extra in the QP keeps the interpolated knots clear.
                     required + cfg.clearance_tolerance,
@@ -414,18 +529,21 @@ class Planner:
                 ),
                 required,
             )
-        collisions, required = self._limits[key]
-        # Keep a small extra margin in the QP so that interpolated knots stay inside the checked one.
-        balance = SupportPolygonLimit(model, ids.base_body, polygon, cfg.support_margin + 0.002)
-        limits: list[mink.Limit] = [self.tilt, balance, collisions]
-        if posture:
-            limits.insert(1, self.pelvis)
-        constraints: list[mink.Task] = list(self.feet)
+        return self._limits[key]
 
-        clearance0 = collisions.distances(conf.data)
-        # What a step may not cut below: the required clearance (or the start distance, when a
-        # pair starts closer), less a slack well inside the knots' check (clearance_tolerance).
-        floor = np.minimum(clearance0, required) - cfg.step_slack
+    def _ik_path(
+        self, name: str, goals: dict[str, list[mink.SE3]], qp: _MoveQP, floor: FloatArray
+    ) -> tuple[list[FloatArray], int, float]:
+        """IK steps from the current configuration until every hand is at the last of its goals.
+
+        Returns the path (qpos per step, the start first), the iterations and the time spent in
+        the QP (s). Raises PlanningError (:meth:`_fail`) on the iteration budget or a stall,
+        and when the QP has no solution.
+        """
+        cfg, conf = self.config, self.configuration
+        tasks, limits, constraints, collisions = qp.tasks, qp.limits, qp.constraints, qp.collisions
+        stage = {side: 0 for side in goals}
+        active = {side: route[0] for side, route in goals.items()}
         path = [conf.q]
         errors = self._errors(active)
         history = [max(p + a for p, a in errors.values())]
@@ -438,7 +556,7 @@ class Planner:
             if relax > cfg.relax_floor and self._stalled(history, cfg.relax_iterations):
                 # Short of the floor a short stall relaxes; at the floor only a long stall fails.
                 relax *= cfg.relax_factor
-                self.posture.set_cost(np.where(idle_dofs, posture_cost, posture_cost * relax))
+                self.posture.set_cost(np.where(qp.idle_dofs, qp.posture_cost, qp.posture_cost * relax))
                 history = history[-1:]
             elif self._stalled(history, cfg.stall_iterations):
                 self._fail(name, errors, iterations)
@@ -447,51 +565,51 @@ class Planner:
             try:
                 velocity = self._solve(tasks, limits, constraints, collisions)
             except mink.NoSolutionFound as exc:
-                side, (pos, ang) = max(errors.items(), key=lambda kv: kv[1][0])
-                raise PlanningError(
-                    name,
-                    side,
-                    pos,
-                    ang,
-                    iterations,
-                    f"motion '{name}': the IK QP has no solution after {iterations} iterations ({exc}); "
-                    f"{side} hand {pos:.3f} m and {np.degrees(ang):.1f} deg from its target",
-                ) from exc
+                raise self._no_solution(name, errors, iterations, exc) from exc
             ik_time += time.perf_counter() - tick
-            self._step(velocity, relative, collisions, floor)
+            self._step(velocity, qp.relative, collisions, floor)
             iterations += 1
             path.append(conf.q)
             self._path_lowest = min(self._path_lowest, float(conf.q[self.base_z_adr]))
             errors = self._errors(active)
-            for side, (pos, _ang) in errors.items():
-                # A via point is passed, not reached: move on once the hand is near it.
-                if stage[side] < len(goals[side]) - 1 and pos < cfg.via_tolerance:
-                    stage[side] += 1
-                    active[side] = goals[side][stage[side]]
-                    self.hands[side].set_target(active[side])
-                    errors = self._errors(active)
-                    history = []
+            if self._pass_vias(errors, goals, stage, active):
+                errors = self._errors(active)
+                history = []
             history.append(max(p + a for p, a in errors.values()))
+        return path, iterations, ik_time
 
-        trajectory = build_trajectory(
-            model,
-            cfg,
-            np.array(path),
+    def _pass_vias(
+        self,
+        errors: dict[str, tuple[float, float]],
+        goals: dict[str, list[mink.SE3]],
+        stage: dict[str, int],
+        active: dict[str, mink.SE3],
+    ) -> bool:
+        """Aim each hand near its via point at the next goal of its route (a via point is
+        passed, not reached); ``stage`` and ``active`` are updated. Returns whether any moved on."""
+        moved = False
+        for side, (pos, _ang) in errors.items():
+            if stage[side] < len(goals[side]) - 1 and pos < self.config.via_tolerance:
+                stage[side] += 1
+                active[side] = goals[side][stage[side]]
+                self.hands[side].set_target(active[side])
+                moved = True
+        return moved
+
+    def _no_solution(
+        self, name: str, errors: dict[str, tuple[float, float]], iterations: int, exc: Exception
+    ) -> PlanningError:
+        """The error of a step whose QP has no solution, naming the hand farthest from its goal."""
+        side, (pos, ang) = max(errors.items(), key=lambda kv: kv[1][0])
+        return PlanningError(
             name,
-            TimedJoints(self.timed_dofs, self.timed_limits),
-            Frames(dict(ids.hand_sites), ids.base_body, self.quat_adr),
-            carried,
-            relative,
-            polygon,
-            collisions,
-            np.minimum(clearance0, required),
+            side,
+            pos,
+            ang,
+            iterations,
+            f"motion '{name}': the IK QP has no solution after {iterations} iterations ({exc}); "
+            f"{side} hand {pos:.3f} m and {np.degrees(ang):.1f} deg from its target",
         )
-        if posture:
-            self._check_posture(trajectory)
-        self.last_stats = PlanStats(
-            name, iterations, ik_time, time.perf_counter() - started, len(trajectory.times)
-        )
-        return trajectory
 
     def _check_posture(self, trajectory: Trajectory) -> None:
         """Every knot's pelvis within the safe posture (the QP's limit is first order), or no
