@@ -20,10 +20,15 @@ import dataclasses
 import sys
 import time
 
-from executive.decision.approval import ApprovalDecision, ApprovalRequest, CallbackChannel
+from executive import (
+    ApprovalDecision,
+    ApprovalRequest,
+    CallbackChannel,
+    Executive,
+    freeze_startup_heap,
+    load,
+)
 from executive.decision.audit import now_iso
-from executive.runtime.mission import Executive, freeze_startup_heap
-from executive.scenario import load
 
 PERIOD_S = 0.01  # the host's control period: 100 Hz
 
