@@ -4,7 +4,8 @@ A kind is found by its YAML key (``transfer``) among, in order: kinds registered
 this process (:func:`register`), the built-in kinds, and entry points in the group
 ``executive.task_kinds`` (``name = "package.module:Class"``). A scenario may also name
 a class directly: ``kind: package.module:Class`` in a task block (see
-:func:`resolve`). Kinds are imported only when first asked for.
+:func:`resolve`); it is then registered under its name, which its tasks' ``kind`` gives
+(a name another kind already has is refused). Kinds are imported only when first asked for.
 """
 
 from __future__ import annotations
@@ -78,10 +79,18 @@ def resolve(path: str) -> TaskKind:
 
 
 def _instance(target: object, where: str) -> TaskKind:
-    instance = target() if isinstance(target, type) else target
-    if not isinstance(instance, TaskKind):
-        raise TaskKindError(f"'{where}' is not a TaskKind (a subclass of executive.tasks.base.TaskKind)")
-    return instance
+    """``target`` itself or, a class, an instance of it; only a TaskKind is accepted."""
+    not_kind = f"'{where}' is not a TaskKind (a subclass of executive.tasks.base.TaskKind)"
+    if isinstance(target, type):
+        if not issubclass(target, TaskKind):
+            raise TaskKindError(not_kind)
+        try:
+            target = target()
+        except Exception as error:  # a plug-in's own constructor, reported with its path
+            raise TaskKindError(f"task kind '{where}' cannot be made: {error}") from None
+    if not isinstance(target, TaskKind):
+        raise TaskKindError(not_kind)
+    return target
 
 
 def get(name: str) -> TaskKind:
@@ -91,7 +100,7 @@ def get(name: str) -> TaskKind:
         TaskKindError: no kind of that name; the message lists those available.
     """
     if ":" in name:
-        return resolve(name)
+        return _register_path(name)
     if name in _registered:
         return _registered[name]
     if name in BUILT_IN:
@@ -105,3 +114,18 @@ def get(name: str) -> TaskKind:
         problem = f"task kind '{name}' (entry point {entry.value}) fails to load: {error}"
         raise TaskKindError(problem) from None
     return register(_instance(target, f"entry point {entry.value}"))
+
+
+def _register_path(path: str) -> TaskKind:
+    """The kind at a dotted path, registered under its name (later asked for by its tasks' ``kind``).
+
+    Raises:
+        TaskKindError: it cannot be resolved, or its name is taken by a different kind.
+    """
+    kind = resolve(path)
+    where = f"{type(kind).__module__}:{type(kind).__qualname__}"
+    known = _registered.get(kind.name)
+    taken = f"{type(known).__module__}:{type(known).__qualname__}" if known else BUILT_IN.get(kind.name)
+    if taken is not None and taken != where:
+        raise TaskKindError(f"task kind '{path}' is named '{kind.name}', the name of the kind {taken}")
+    return known if known is not None else register(kind)
