@@ -1,49 +1,14 @@
 """Collision risk of a trajectory: coal signed distances, the seed metric, and P(collision).
 
-The seed metric (Long et al. 2018, "Collision Risk"):
-
-- instantaneous risk ``r(t) = (1 - d(t)/d_safety)^b`` when ``d < d_safety``
-  (1 when ``d <= 0``), else 0, with ``d`` the minimum robot-environment distance;
-- trajectory score: ``peak_weight * r(min_t d) + exposure_weight * (time within
-  d_safety) / duration``.
-
-Beyond the seed: the probability of a collision when the environment bodies'
-horizontal positions are uncertain (``Uncertainty.object_position`` and
-``obstacle_position``, 1-sigma per axis; the table is exact). To first order
-along coal's witness normal ``n`` (from the environment geom to the robot geom),
-shifting a body by ``delta`` changes a distance by ``-n . delta``, so one pair
-collides with ``P = Phi(-d / sqrt(n^T Sigma n))``. Per knot the pairs of one body
-share its shift; different bodies are independent (``P_k = 1 - prod_b (1 - P_bk)``).
-Over a trajectory the same (static) error holds at every knot, which makes the
-knots strongly correlated: the report gives the union bounds
-``max_k P_k <= P <= min(1, sum_k P_k)`` and, as the point estimate, the exact
-Gaussian probability of the union of the linearised events over all knots and
-pairs (a 2-D integral per body, see :func:`gaussian_union_probability`). The
-sum bound is very loose with many knots; the point estimate is not.
-:func:`monte_carlo_collision_probability` samples the same Gaussian and
-recomputes coal distances, for validation. Known bias of first order: exact
-past a flat face; conservative (too high) where the closest feature is an edge
-or corner, or where a face overlap is about to end, since the tangent
-half-plane contains the true collision set (measured: ball round a box edge
-0.0062 vs 0.0050 sampled; a book sliding past the stack's corner 0.032 vs 0.022).
-
-Pairs: every robot geom (plus the carried object's geom, which moves to the
-robot side) against the table, obstacles and objects not carried, and the
-carried object against the robot's own geoms (its own pose error is that
-pair's sigma; the holding hand is allowed by the step); the floor is never a
-pair (feet stand on it) and robot-robot pairs are not considered.
-``allow`` removes pairs per query: an environment geom/body name, or a (robot
-geom/body, environment geom/body) pair; see :meth:`CollisionModel.hand_allow`
-(the hand vs the object it grasps) and :meth:`CollisionModel.support_allow`
-(a carried object vs the table it leaves or reaches).
-
-Signed distances come from coal (``coal.ComputeDistance``; negative inside,
-via GJK/EPA; coal docs, "DistanceRequest.enable_signed_distance"). A broad
-phase bounds each pair from below by the distance of the robot geom's bounding
-sphere (``geom_rbound``) to the environment geom's oriented bounding box
-(``geom_aabb``) and calls coal only for pairs that can come within
-``d_safety + margin + n_sigma * sigma``; the knot's minimum stays exact (pairs
-beyond are then visited in the order of their bounds until none can beat it).
+:class:`CollisionModel` finds the closest robot-environment approach at every knot (coal signed
+distances behind a broad phase; its doc says which pairs). :func:`assess_collision` scores a
+trajectory: the seed metric (Long et al. 2018, "Collision Risk": instantaneous risk
+``(1 - d/d_safety)^b``, trajectory score ``peak_weight * peak + exposure_weight * exposure``) and
+the probability of a collision when the environment bodies' horizontal positions are uncertain,
+to first order along coal's witness normals, over the union of all knots
+(:mod:`executive.risk.collision_probability`; the union bounds ``max_k P_k <= P <= min(1, sum_k
+P_k)`` alongside). :func:`monte_carlo_collision_probability` samples the same errors and
+recomputes coal distances, to validate it (the first order's bias: docs/measurements.md).
 """
 
 from __future__ import annotations
@@ -367,6 +332,24 @@ class CollisionModel:
 
     ``CollisionModel(world, risk_config)`` uses the scenario's uncertainty; see
     :meth:`from_setup` for any MuJoCo model. Not thread-safe (it owns one ``MjData``).
+
+    Pairs: every robot geom (plus the carried object's geom, which moves to the
+    robot side) against the table, obstacles and objects not carried, and the
+    carried object against the robot's own geoms (its own pose error is that
+    pair's sigma; the holding hand is allowed by the step); the floor is never a
+    pair (feet stand on it) and robot-robot pairs are not considered.
+    ``allow`` removes pairs per query: an environment geom/body name, or a (robot
+    geom/body, environment geom/body) pair; see :meth:`hand_allow`
+    (the hand vs the object it grasps) and :meth:`support_allow`
+    (a carried object vs the table it leaves or reaches).
+
+    Signed distances come from coal (``coal.ComputeDistance``; negative inside,
+    via GJK/EPA; coal docs, "DistanceRequest.enable_signed_distance"). A broad
+    phase bounds each pair from below by the distance of the robot geom's bounding
+    sphere (``geom_rbound``) to the environment geom's oriented bounding box
+    (``geom_aabb``) and calls coal only for pairs that can come within
+    ``d_safety + margin + n_sigma * sigma``; the knot's minimum stays exact (pairs
+    beyond are then visited in the order of their bounds until none can beat it).
     """
 
     def __init__(
@@ -618,7 +601,7 @@ class CollisionModel:
     def _pair_distance(self, layout: _Layout, ei: int, ri: int) -> float:
         """coal signed distance of layout pair (env ei, robot ri) at the placed transforms."""
         # The functor does not reset a reused result: without clear() the witness points and
-        # normal can be those of an earlier, closer query (verified with coal 3.0.3).
+        # normal can be those of an earlier, closer query (docs/measurements.md).
         self._result.clear()
         return float(
             layout.functors[ei][ri](
@@ -638,29 +621,16 @@ class CollisionModel:
         *,
         near: bool = True,
     ) -> KnotDistance:
+        """:meth:`knot` at the kinematics in ``data``: coal on the broad phase's first pairs, then
+        on the pairs beyond them nearest bound first while a bound is below the best distance.
+        ``travel``: the profile's bounds at every knot (at its knot ``k``), told every distance."""
         n_pairs = layout.n_pairs
         if n_pairs == 0:
             raise CollisionModelError("no robot-environment pair is left to check (all allowed)")
-        if broad_phase:
-            if travel is not None:
-                bounds = travel.bounds()  # excluded pairs already at inf
-            else:
-                bounds = np.where(layout.mask, self._lower_bounds(data, layout), np.inf)
-            # near: every pair within the cutoff first (all of them are wanted); else none first
-            first = bounds <= layout.cutoff[:, None] if near else np.zeros_like(layout.mask)
-        else:
-            bounds = np.where(layout.mask, -np.inf, np.inf)
-            first = layout.mask
+        bounds, first = self._first_pairs(data, layout, broad_phase, travel, near)
         env_ids, robot_ids = layout.env_list, layout.robot_list
         cand_e, cand_r = np.nonzero(first)
-        placed_e = [False] * len(env_ids)
-        placed_r = [False] * len(robot_ids)
-        for ei in set(cand_e.tolist()):
-            self._place(data, env_ids[ei])
-            placed_e[ei] = True
-        for ri in set(cand_r.tolist()):
-            self._place(data, robot_ids[ri])
-            placed_r[ri] = True
+        placed_e, placed_r = self._place_first(data, layout, cand_e, cand_r)
         res = self._result
         cutoff = layout.cutoff_list
         best, best_e, best_r = math.inf, -1, -1
@@ -697,14 +667,70 @@ class CollisionModel:
                 if flat[idx] >= best:  # the pair is excluded or already visited
                     break
                 ei, ri = divmod(idx, rest.shape[1])
-                if not placed_e[ei]:
-                    self._place(data, env_ids[ei])
-                    placed_e[ei] = True
-                if not placed_r[ri]:
-                    self._place(data, robot_ids[ri])
-                    placed_r[ri] = True
+                self._place_pair(data, layout, placed_e, placed_r, ei, ri)
                 visit(ei, ri)
-        env, robot = env_ids[best_e], robot_ids[best_r]
+        return self._knot_distance(
+            best, env_ids[best_e], robot_ids[best_r], witness, checked, n_pairs, near_pairs
+        )
+
+    def _first_pairs(
+        self, data: mujoco.MjData, layout: _Layout, broad_phase: bool, travel: _TravelBound | None, near: bool
+    ) -> tuple[FloatArray, NDArray[np.bool_]]:
+        """(E, R) broad-phase lower bounds (inf: excluded pair; -inf for all considered pairs
+        without the broad phase) and the pairs to visit first: those within the cutoff if
+        ``near`` (all of them are wanted), else none; without the broad phase every pair."""
+        if not broad_phase:
+            return np.where(layout.mask, -np.inf, np.inf), layout.mask
+        if travel is not None:
+            bounds = travel.bounds()  # excluded pairs already at inf
+        else:
+            bounds = np.where(layout.mask, self._lower_bounds(data, layout), np.inf)
+        return bounds, (bounds <= layout.cutoff[:, None] if near else np.zeros_like(layout.mask))
+
+    def _place_first(
+        self, data: mujoco.MjData, layout: _Layout, cand_e: NDArray[np.int_], cand_r: NDArray[np.int_]
+    ) -> tuple[list[bool], list[bool]]:
+        """Place the coal transforms of the geoms of the first pairs; returns which environment
+        and which robot geoms (layout order) are placed."""
+        placed_e = [False] * len(layout.env_list)
+        placed_r = [False] * len(layout.robot_list)
+        for ei in set(cand_e.tolist()):
+            self._place(data, layout.env_list[ei])
+            placed_e[ei] = True
+        for ri in set(cand_r.tolist()):
+            self._place(data, layout.robot_list[ri])
+            placed_r[ri] = True
+        return placed_e, placed_r
+
+    def _place_pair(
+        self,
+        data: mujoco.MjData,
+        layout: _Layout,
+        placed_e: list[bool],
+        placed_r: list[bool],
+        ei: int,
+        ri: int,
+    ) -> None:
+        """Place the coal transforms of layout pair (env ei, robot ri) unless they are placed."""
+        if not placed_e[ei]:
+            self._place(data, layout.env_list[ei])
+            placed_e[ei] = True
+        if not placed_r[ri]:
+            self._place(data, layout.robot_list[ri])
+            placed_r[ri] = True
+
+    def _knot_distance(
+        self,
+        best: float,
+        env: int,
+        robot: int,
+        witness: tuple[FloatArray, FloatArray, FloatArray],
+        checked: int,
+        n_pairs: int,
+        near_pairs: list[NearPair],
+    ) -> KnotDistance:
+        """The knot's closest approach: distance ``best`` between geoms ``env`` and ``robot``,
+        with its witness points (robot, environment) and normal, and the pairs coal checked."""
         point_robot, point_env, normal = witness
         config = self.risk_config
         return KnotDistance(
@@ -757,7 +783,7 @@ def report_from_profile(model: CollisionModel, prof: CollisionProfile) -> RiskRe
 
     Severity = ``severity.collision`` x the body-part factor of the robot body in the
     closest approach (Long et al. 2018, conclusion: more sensitive parts such as cameras
-    weigh more). Probability: see the module doc (first order, union over all knots).
+    weigh more). Probability: first order, union over all knots (see the module doc).
     """
     config = model.risk_config
     distances = prof.distances
