@@ -15,7 +15,7 @@ from executive.scenario.types import Body, SceneConfig
 from executive.tasks.hands import UP, HandFrames
 from executive.tasks.steps import CompositionConfig, Step
 
-__all__ = ["carry_lane_front", "grasp_height", "lane_carry", "pick", "place"]
+__all__ = ["carry_lane_front", "grasp_height", "lane_carry", "one_hand_leg", "pick", "place"]
 
 FloatArray = NDArray[np.float64]
 
@@ -134,4 +134,44 @@ def lane_carry(
             (h.target(side, lane_out, carry_yaw, grasp_yaw),),
             carried=carried,
         ),
+    ]
+
+
+def one_hand_leg(
+    h: HandFrames,
+    side: str,
+    body: Body,
+    start: tuple[FloatArray, float],
+    end: tuple[FloatArray, float],
+    cfg: CompositionConfig,
+) -> list[Step]:
+    """One hand moves ``body`` from ``start`` to ``end`` (centre, yaw), both resting: pick, carry, place.
+
+    Straight, simple hand paths: up, back to the lane, across the body in that lane (the
+    carried object skirting the front of the obstacles it passes at ``obstacle_clearance``,
+    :func:`carry_lane_front`), forward over the place, down, open, up, home. A robot whose
+    profile asks for it (``return_along_lane``) first goes back along the lane to its own side
+    after placing across the body, as it is, and only then turns home: the straight way home
+    from across the body swings the arm across the body's front while the hand turns.
+    """
+    (pos, yaw), (centre, end_yaw) = start, end
+    grasp = np.array([pos[0], pos[1], grasp_height(body, float(pos[2]), cfg)])
+    place_at = centre + (grasp[2] - pos[2]) * UP
+    carry_z = max(grasp[2] + cfg.lift_height, place_at[2] + cfg.approach_height)
+    length = body.size[0] if body.shape == "box" else 2 * body.size[0]
+    scene = h.world.scenario.scene
+    front_x = carry_lane_front(
+        scene, (pos[1], centre[1]), length / 2 + cfg.obstacle_clearance, h.base[0], pos[0]
+    )
+    lane_x = min(front_x - cfg.obstacle_clearance - length / 2, grasp[0], place_at[0])
+    lane = (np.array([lane_x, grasp[1], carry_z]), np.array([lane_x, place_at[1], carry_z]))
+    back: tuple[Step, ...] = ()
+    home_side = h.side_of_body(h.home[side].position)
+    if h.world.profile.return_along_lane and h.side_of_body(place_at) != home_side:
+        back_point = np.array([lane_x, h.home[side].position[1], carry_z])
+        back = (Step("move", f"{side}.back", side, (h.target(side, back_point, end_yaw, yaw),)),)
+    return [
+        *pick(h, side, body.name, grasp, yaw, cfg),
+        *lane_carry(h, side, body.name, lane, (yaw + end_yaw) / 2, yaw),
+        *place(h, side, body.name, place_at, end_yaw, yaw, cfg, back),
     ]

@@ -5,7 +5,7 @@ For an object that cannot be handed over (its yaw matters, odd ``yaw_symmetry``:
 body. The first hand picks the object and sets it down, at its own yaw, on the free spot
 of the table nearest the midline in front of the body (:func:`midway_spot`), lets go and
 goes home; the second picks it up there and places it. Each leg is a pick, a lane carry
-and a place (:mod:`executive.tasks.phases`); the object keeps its yaw on the table, so
+and a place (:func:`executive.tasks.phases.one_hand_leg`); the object keeps its yaw on the table, so
 every grasp is the same top-down grasp and the object's yaw is never turned by a half turn.
 """
 
@@ -21,8 +21,8 @@ from numpy.typing import NDArray
 from executive.planning.planner import PlanningError
 from executive.scenario.scene import over_table
 from executive.scenario.types import Body
-from executive.tasks.hands import UP, HandFrames, yaw_of
-from executive.tasks.phases import carry_lane_front, grasp_height, lane_carry, pick, place
+from executive.tasks.hands import HandFrames, yaw_of
+from executive.tasks.phases import one_hand_leg
 from executive.tasks.steps import CompositionConfig, Step
 from executive.world.model import World
 
@@ -167,41 +167,6 @@ def _nearest(
     return None
 
 
-def leg(
-    world: World,
-    side: str,
-    body: Body,
-    start: tuple[FloatArray, float],
-    end: tuple[FloatArray, float],
-    cfg: CompositionConfig,
-) -> list[Step]:
-    """One hand moves ``body`` from ``start`` to ``end`` (centre, yaw): pick, lane carry, place, home.
-
-    The lane runs in front of the obstacles the carry passes, as a one-arm transfer's
-    (:func:`executive.tasks.phases.carry_lane_front`).
-    """
-    h = HandFrames(world)
-    (pos, yaw), (centre, end_yaw) = start, end
-    grasp = np.array([pos[0], pos[1], grasp_height(body, float(pos[2]), cfg)])
-    place_at = centre + (grasp[2] - pos[2]) * UP
-    carry_z = max(grasp[2] + cfg.lift_height, place_at[2] + cfg.approach_height)
-    length = body.size[0] if body.shape == "box" else 2 * body.size[0]
-    front_x = carry_lane_front(
-        world.scenario.scene, (pos[1], centre[1]), length / 2 + cfg.obstacle_clearance, h.base[0], pos[0]
-    )
-    lane_x = min(front_x - cfg.obstacle_clearance - length / 2, grasp[0], place_at[0])
-    lane = (np.array([lane_x, grasp[1], carry_z]), np.array([lane_x, place_at[1], carry_z]))
-    back: tuple[Step, ...] = ()
-    if world.profile.return_along_lane and h.side_of_body(place_at) != h.side_of_body(h.home[side].position):
-        back_point = np.array([lane_x, h.home[side].position[1], carry_z])
-        back = (Step("move", f"{side}.back", side, (h.target(side, back_point, end_yaw, yaw),)),)
-    return [
-        *pick(h, side, body.name, grasp, yaw, cfg),
-        *lane_carry(h, side, body.name, lane, (yaw + end_yaw) / 2, yaw),
-        *place(h, side, body.name, place_at, end_yaw, yaw, cfg, back),
-    ]
-
-
 def transfer(world: World, task: object, first: str, second: str, cfg: CompositionConfig) -> list[Step]:
     """The steps of a transfer by regrasp: ``first`` sets the object down midway, ``second`` places it.
 
@@ -217,7 +182,8 @@ def transfer(world: World, task: object, first: str, second: str, cfg: Compositi
     pos, quat = world.object_pose(task.object)
     target = target_placement(world, body, task.to, task.to_yaw_rad, 0.0)
     spot = midway_spot(world, task.object, pos, target.centre, cfg.obstacle_clearance)
+    h = HandFrames(world)
     return [
-        *leg(world, first, body, (pos, yaw_of(quat)), (spot.centre, spot.yaw), cfg),
-        *leg(world, second, body, (spot.centre, spot.yaw), (target.centre, target.yaw), cfg),
+        *one_hand_leg(h, first, body, (pos, yaw_of(quat)), (spot.centre, spot.yaw), cfg),
+        *one_hand_leg(h, second, body, (spot.centre, spot.yaw), (target.centre, target.yaw), cfg),
     ]

@@ -27,8 +27,8 @@ from executive.scenario.yaml_nodes import Node
 from executive.tasks import handover as handover_steps
 from executive.tasks import regrasp as regrasp_steps
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict
-from executive.tasks.hands import UP, HandFrames, yaw_of
-from executive.tasks.phases import carry_lane_front, grasp_height, lane_carry, pick, place
+from executive.tasks.hands import HandFrames, yaw_of
+from executive.tasks.phases import one_hand_leg
 from executive.tasks.steps import CompositionConfig, Step
 from executive.world.model import World
 
@@ -147,40 +147,13 @@ def placed_verdict(
 def one_hand_steps(world: World, task: TransferTask, side: str, cfg: CompositionConfig) -> list[Step]:
     """Pick, carry across the body in the lane in front of what is in the way, place, home.
 
-    Straight, simple hand paths: up, back to the lane, across the body in that lane (the
-    carried object skirting the obstacles' front at ``obstacle_clearance``: the one-arm
-    alternatives' risk), forward over the place, down.
+    The carried object skirts the obstacles' front at ``obstacle_clearance`` (the one-arm
+    alternatives' risk); see :func:`executive.tasks.phases.one_hand_leg`.
     """
-    h = HandFrames(world)
     body = next(b for b in world.scenario.scene.objects if b.name == task.object)
     pos, quat = world.object_pose(task.object)
-    yaw = yaw_of(quat)
-    grasp = np.array([pos[0], pos[1], grasp_height(body, pos[2], cfg)])
-    target = target_placement(world, body, task.to, task.to_yaw_rad, grasp[2] - pos[2])
-    place_at = target.centre + target.site_above_centre * UP
-    carry_z = max(grasp[2] + cfg.lift_height, place_at[2] + cfg.approach_height)
-    length = body.size[0] if body.shape == "box" else 2 * body.size[0]
-    front_x = carry_lane_front(
-        world.scenario.scene,
-        (pos[1], target.centre[1]),
-        length / 2 + cfg.obstacle_clearance,
-        h.base[0],
-        pos[0],
-    )
-    lane_x = min(front_x - cfg.obstacle_clearance - length / 2, grasp[0], place_at[0])
-    lane = (np.array([lane_x, grasp[1], carry_z]), np.array([lane_x, place_at[1], carry_z]))
-    # A hand that placed the object across the body first goes back along the lane to its own
-    # side, as it is (the retreat's orientation), and only then turns home: the straight way
-    # home from across the body swings the arm across the body's front while the hand turns.
-    back: tuple[Step, ...] = ()
-    if world.profile.return_along_lane and h.side_of_body(place_at) != h.side_of_body(h.home[side].position):
-        back_point = np.array([lane_x, h.home[side].position[1], carry_z])
-        back = (Step("move", f"{side}.back", side, (h.target(side, back_point, target.yaw, yaw),)),)
-    return [
-        *pick(h, side, task.object, grasp, yaw, cfg),
-        *lane_carry(h, side, task.object, lane, (yaw + target.yaw) / 2, yaw),
-        *place(h, side, task.object, place_at, target.yaw, yaw, cfg, back),
-    ]
+    target = target_placement(world, body, task.to, task.to_yaw_rad, 0.0)
+    return one_hand_leg(HandFrames(world), side, body, (pos, yaw_of(quat)), (target.centre, target.yaw), cfg)
 
 
 def transfer_steps(
