@@ -49,6 +49,8 @@ Allowed contacts
 - objects with each other while neither is carried (a stack);
 - an object with the hand geoms (the subtree of that side's hand body) of a side
   that is grasping (closing on) or carrying it;
+- an obstacle with the hand geoms of a side that presses it (``set_phase(grasping=(side,
+  obstacle))``, a press task's hold); any other contact of that hand is still a collision;
 - the robot's own self-contacts: never a failure (the embedded humanoid excludes
   adjacent links explicitly, so one is rare), but counted, with the largest force,
   in :attr:`FailureDetector.closest_call`.
@@ -266,6 +268,7 @@ class FailureDetector:
             for side, bodies in ids.hand_bodies.items()
         }
         self._object_geom = dict(ids.object_geoms)
+        self._obstacle_geom = dict(ids.obstacle_geoms)
         self._robot_set = frozenset(ids.robot_geoms)
         self._object_set = frozenset(ids.object_geoms.values())
         self._table = np.array(ids.table_geoms, dtype=np.int64)
@@ -343,7 +346,8 @@ class FailureDetector:
         """Declare what the behaviour does now; each call replaces the previous phase.
 
         carried: (side, object) the hand holds now; grasping: (side, object) the hand may
-        touch now (closing on it); placing: the object allowed to touch the table now;
+        touch now (closing on it), or (side, obstacle) it presses; placing: the object allowed
+        to touch the table now;
         approaching: (side, object) the open hand is moving onto to grasp: a forceful touch
         now is a misaligned grasp (mode ``drop``), not a collision.
         A handover carries with one side and grasps with the other.
@@ -353,7 +357,8 @@ class FailureDetector:
         for pair in (carried, grasping, approaching):
             if pair is not None:
                 self._check_side(pair[0])
-                self._check_object(pair[1])
+                if pair is not grasping or pair[1] not in self._obstacle_geom:  # a press touches an obstacle
+                    self._check_object(pair[1])
         if placing is not None:
             self._check_object(placing)
         if carried is not None:
@@ -369,7 +374,7 @@ class FailureDetector:
             put(g, self._hand_geoms[side], _MISGRASP, codes)
         if grasping is not None:
             side, name = grasping
-            g = np.array([self._object_geom[name]], dtype=np.int64)
+            g = np.array([self._object_geom.get(name, self._obstacle_geom.get(name))], dtype=np.int64)
             put(g, self._hand_geoms[side], _ALLOWED, codes)
         if placing is not None:
             g = np.array([self._object_geom[placing]], dtype=np.int64)
