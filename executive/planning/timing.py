@@ -1,19 +1,8 @@
 """Trajectories of the planner and the time parameterisation of a geometric IK path.
 
-The differential-IK iterations give a geometric path ``q_0 .. q_N``. It is
-re-timed in two steps:
-
-1. a path parameter ``s`` in "seconds at full speed": each IK step costs
-   ``max_j |dq_j| / v_j`` (the step's duration if the slowest joint ran at its
-   limit ``v_j``), so ``|dq_j / ds| <= v_j`` along the piecewise-linear path;
-2. a minimum-jerk profile ``s(t) = S (10 u^3 - 15 u^4 + 6 u^5)``, ``u = t / T``
-   (Flash & Hogan 1985), whose peak rate is ``1.875 S / T`` and peak
-   acceleration ``5.7735 S / T^2``. ``T`` is the smallest duration with
-   ``ds/dt <= 1`` (so no joint exceeds its limit, also between knots: the
-   path is piecewise linear in ``s``) and ``d2s/dt2 <= a / v`` (the tangential
-   part of the joint acceleration bounded by ``a``).
-
-Knots are uniform in time. Interpolation is linear in qpos with free-joint
+:class:`Trajectory` is a timed whole-body motion; :func:`build_trajectory` re-times the planner's
+IK path (minimum-jerk, within the joints' speed and acceleration limits and the ZMP's margin)
+and checks every knot's clearance and balance. Interpolation is linear in qpos with free-joint
 quaternions normalised, both when building knots and in :meth:`Trajectory.sample`.
 """
 
@@ -98,7 +87,9 @@ class Frames(NamedTuple):
 
 
 def min_jerk(u: FloatArray) -> FloatArray:
-    """Minimum-jerk blend 10u^3 - 15u^4 + 6u^5 on [0, 1] (zero rate and acceleration at both ends)."""
+    """Minimum-jerk blend 10u^3 - 15u^4 + 6u^5 on [0, 1] (zero rate and acceleration at both ends).
+
+    Flash & Hogan 1985; its peak rate is 1.875 and its peak acceleration 5.7735 (u = t / T)."""
     u = np.clip(u, 0.0, 1.0)
     return np.asarray(u**3 * (10.0 + u * (-15.0 + 6.0 * u)), dtype=float)
 
@@ -195,30 +186,83 @@ def build_trajectory(
 ) -> Trajectory:
     """Re-time an IK path and check every knot: clearance and balance.
 
-    ``floor`` (m, one per collision pair) is the distance each pair must keep: its required
-    clearance, or its distance at the start when it starts closer.
+    The path ``q_0 .. q_N`` is re-timed in two steps:
 
+    1. a path parameter ``s`` in "seconds at full speed" (:func:`path_parameter`): each IK step
+       costs ``max_j |dq_j| / v_j`` (the step's duration if the slowest joint ran at its
+       limit ``v_j``), so ``|dq_j / ds| <= v_j`` along the piecewise-linear path; the hands'
+       speed is bounded too (``cfg.hand_speed``);
+    2. a minimum-jerk profile ``s(t)`` (:func:`retime`) with the smallest duration ``T`` with
+       ``ds/dt <= 1`` (so no joint exceeds its limit, also between knots: the path is
+       piecewise linear in ``s``) and ``d2s/dt2 <= a / v`` (the tangential part of the joint
+       acceleration bounded by ``a``), stretched while the zero-moment point comes too near
+       the support polygon's edge.
+
+    Knots are uniform in time. ``floor`` (m, one per collision pair) is the distance each pair
+    must keep: its required clearance, or its distance at the start when it starts closer.
     A carried object is re-attached to its hand at every knot, so it moves rigidly with it.
+
+    Raises PlanningError when no timing keeps the zero-moment point inside, or a knot breaks
+    a clearance or the CoM's support margin.
     """
-
-    def timing_failure(message: str) -> PlanningError:
-        """The timed motion breaks a limit: no hand fell short (both reached, errors 0) after all
-        the path's IK iterations."""
-        return PlanningError(name, None, 0.0, 0.0, len(path) - 1, message)
-
     # The hands' (and so a carried object's) speed is bounded too: the servos' tracking error
     # grows with it, and clearance is planned against that error.
-    sites = list(frames.hand_sites.values())
+    points = _hand_points(model, path, list(frames.hand_sites.values()))
+    s_path = path_parameter(model, path, joints.dofs, joints.limits, points, cfg.hand_speed)
+    # Tangential acceleration a = |dq/ds| s'' <= v s'': bound s'' by a / v (v the largest limit).
+    ratio = cfg.acceleration_limit / float(np.max(joints.limits))
+    data = mujoco.MjData(model)
+    times, knots = _zmp_timed_knots(model, data, cfg, path, s_path, ratio, name, relative, polygon, frames)
+    # The last round's knots, a carried object re-attached to its hand (as _knot_kinematics left them).
+    qpos, com = knots.qpos, knots.com
+    hands = {s: knots.hands[:, i].copy() for i, s in enumerate(frames.hand_sites)}
+    _check_clearance(model, data, cfg, collisions, knots, times, floor, name, len(path))
+    worst = float(np.min(polygon.margins(com)))
+    if worst < cfg.support_margin - 1e-9:
+        raise _timing_failure(
+            name,
+            len(path),
+            f"motion '{name}': the CoM comes {worst:.4f} m from the support polygon's edge "
+            f"(needs {cfg.support_margin:.3f} m)",
+        )
+    return Trajectory(name, times, qpos, hands, com, carried, frames.quat_adr)
+
+
+def _timing_failure(name: str, path_points: int, message: str) -> PlanningError:
+    """The timed motion ``name`` breaks a limit: no hand fell short (both reached, errors 0)
+    after all the path's IK iterations (``path_points - 1``)."""
+    return PlanningError(name, None, 0.0, 0.0, path_points - 1, message)
+
+
+def _hand_points(model: mujoco.MjModel, path: FloatArray, sites: list[int]) -> FloatArray:
+    """The positions (N, sides, 3) of the hand ``sites`` at each of the path's N points."""
     scratch = mujoco.MjData(model)
     points = np.empty((len(path), len(sites), 3))
     for i, q in enumerate(path):
         scratch.qpos[:] = q
         mujoco.mj_kinematics(model, scratch)
         points[i] = scratch.site_xpos[sites]
-    s_path = path_parameter(model, path, joints.dofs, joints.limits, points, cfg.hand_speed)
-    # Tangential acceleration a = |dq/ds| s'' <= v s'': bound s'' by a / v (v the largest limit).
-    ratio = cfg.acceleration_limit / float(np.max(joints.limits))
-    data = mujoco.MjData(model)
+    return points
+
+
+def _zmp_timed_knots(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    cfg: PlannerConfig,
+    path: FloatArray,
+    s_path: FloatArray,
+    ratio: float,
+    name: str,
+    relative: Relative | None,
+    polygon: SupportPolygon,
+    frames: Frames,
+) -> tuple[FloatArray, _Knots]:
+    """Knot times and kinematics of the path's min-jerk timing (:func:`retime`, ``ratio`` the
+    bound of d2s/dt2), stretched by ``cfg.zmp_stretch`` until the zero-moment point keeps
+    ``cfg.zmp_margin`` inside the support polygon (or as far in as the CoM itself).
+
+    Raises PlanningError when ``cfg.zmp_retime_rounds`` stretches do not get there.
+    """
     duration = cfg.min_duration
     for _ in range(cfg.zmp_retime_rounds):
         times, s_knots = retime(float(s_path[-1]), ratio, cfg.knot_spacing, cfg.max_knots, duration)
@@ -230,17 +274,31 @@ def build_trajectory(
         # A CoM held near the edge cannot have its ZMP further in than itself: then ask for less.
         needed = min(cfg.zmp_margin, float(np.min(polygon.margins(com))) - 0.005)
         if worst_zmp >= needed or float(s_path[-1]) == 0.0:
-            break
+            return times, knots
         # The CoM's acceleration scales with 1/T^2 on the same path: stretch and check again.
         duration = float(times[-1]) * cfg.zmp_stretch
-    else:
-        raise timing_failure(
-            f"motion '{name}': the zero-moment point comes {worst_zmp:.4f} m from the support polygon's "
-            f"edge even at {times[-1]:.1f} s (needs {needed:.3f} m)",
-        )
-    # The last round's knots, a carried object re-attached to its hand (as _knot_kinematics left them).
-    qpos = knots.qpos
-    hands = {s: knots.hands[:, i].copy() for i, s in enumerate(frames.hand_sites)}
+    raise _timing_failure(
+        name,
+        len(path),
+        f"motion '{name}': the zero-moment point comes {worst_zmp:.4f} m from the support polygon's "
+        f"edge even at {times[-1]:.1f} s (needs {needed:.3f} m)",
+    )
+
+
+def _check_clearance(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    cfg: PlannerConfig,
+    collisions: GeomPairCollisionLimit,
+    knots: _Knots,
+    times: FloatArray,
+    floor: FloatArray,
+    name: str,
+    path_points: int,
+) -> None:
+    """Every collision pair at every knot at least its ``floor`` (m) less ``cfg.clearance_tolerance``
+    apart (``mj_geomDistance`` on the knots' geom poses); else PlanningError naming the first
+    knot that breaks a clearance and its worst pair."""
     floor = np.asarray(floor, dtype=float) - cfg.clearance_tolerance
     # Pairs that the broadphase (on the knots' geom poses) puts farther apart than their floor
     # cannot break it: not asked. (Its bounds hold for distances from 0 up: a floor below 0, a
@@ -257,24 +315,20 @@ def build_trajectory(
             last = k
         distance[j] = mujoco.mj_geomDistance(model, data, g1, g2, dmax, fromto)
     gaps = distance - floor[pairs]
-    if np.any(gaps < 0):
-        k = int(at[np.argmax(gaps < 0)])  # the first knot that breaks a clearance, its worst pair
-        at_k = np.flatnonzero(at == k)
-        j = int(at_k[np.argmin(gaps[at_k])])
-        i = int(pairs[j])
-        n1, n2 = (str(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)) for g in collisions.pairs[i])
-        raise timing_failure(
-            f"motion '{name}': geoms '{n1}' and '{n2}' come within "
-            f"{distance[j]:.4f} m at t = {times[k]:.2f} s "
-            f"(clearance {floor[i] + cfg.clearance_tolerance:.3f} m)",
-        )
-    worst = float(np.min(polygon.margins(com)))
-    if worst < cfg.support_margin - 1e-9:
-        raise timing_failure(
-            f"motion '{name}': the CoM comes {worst:.4f} m from the support polygon's edge "
-            f"(needs {cfg.support_margin:.3f} m)",
-        )
-    return Trajectory(name, times, qpos, hands, com, carried, frames.quat_adr)
+    if not np.any(gaps < 0):
+        return
+    k = int(at[np.argmax(gaps < 0)])  # the first knot that breaks a clearance, its worst pair
+    at_k = np.flatnonzero(at == k)
+    j = int(at_k[np.argmin(gaps[at_k])])
+    i = int(pairs[j])
+    n1, n2 = (str(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)) for g in collisions.pairs[i])
+    raise _timing_failure(
+        name,
+        path_points,
+        f"motion '{name}': geoms '{n1}' and '{n2}' come within "
+        f"{distance[j]:.4f} m at t = {times[k]:.2f} s "
+        f"(clearance {floor[i] + cfg.clearance_tolerance:.3f} m)",
+    )
 
 
 class _Knots(NamedTuple):
