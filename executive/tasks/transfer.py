@@ -78,7 +78,7 @@ def target_placement(
 
 
 class TransferKind(TaskKind):
-    """Move an object to a target pose: one hand, or two with a handover."""
+    """Move an object to a target pose: one hand, or two with a handover or a regrasp."""
 
     name = "transfer"
     alternative_names = (*ONE_HAND, *HANDOVERS, *REGRASPS)
