@@ -256,7 +256,9 @@ class RiskSelector(py_trees.composites.Composite):
                 future.set_exception(exc)
             self._future = future
 
-    def _object_state(self) -> dict[str, Any]:
+    def _object_state(self) -> dict[str, Any] | None:
+        if not self.task.object:  # a task that moves no object (a press)
+            return None
         pos, quat = self.estimate.object_pose(self.task.object)
         return {"name": self.task.object, "position": pos, "quat": quat}
 

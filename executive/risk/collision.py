@@ -438,6 +438,11 @@ class CollisionModel:
             allow |= self.hand_allow(side, obj)
         if carried is not None:
             allow |= self.hand_allow(*carried)
+        for name in allow_contact:  # an obstacle the hand presses (a press step names its target)
+            pressed = self._resolve(name, self.setup.env_geoms) - set(self.setup.support_geoms)
+            pressed -= set(self.setup.object_geoms.values())
+            hand = self.setup.hand_geoms.get(side, ())
+            allow |= {(self._geom_names[h], self._geom_names[g]) for h in hand for g in pressed}
         if kind in ("lift", "place"):
             allow |= self.support_allow(obj)
         return frozenset(allow)

@@ -904,6 +904,8 @@ def assess_hold(world: World, plan: object, risk_config: RiskConfig, uncertainty
         ``details["hold_model"]``.
     """
     severity = risk_config.severity.drop
+    if not getattr(getattr(plan, "task", None), "object", ""):  # a task that holds nothing (a press)
+        return RiskReport("hold", 0.0, (0.0, 0.0), severity, 0.0, details={"hold_model": "nothing held"})
     try:
         problem = hold_problem(world, plan)
     except HoldModelUnavailable as exc:
