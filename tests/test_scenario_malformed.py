@@ -307,7 +307,7 @@ CASES = [
         "unknown-task-kind",
         rename("mission[0].transfer", "transfre"),
         "mission[0].transfre",
-        "unknown task kind 'transfre'; did you mean 'transfer'? valid kinds: transfer",
+        "unknown task kind 'transfre'; did you mean 'transfer'? kinds: ",
     ),
     Case(
         "unknown-task-object",

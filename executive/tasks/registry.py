@@ -14,6 +14,7 @@ import importlib
 from importlib import metadata
 
 from executive.errors import ExecutiveError
+from executive.scenario.yaml_nodes import unknown_name
 from executive.tasks.base import TaskKind
 
 __all__ = ["ENTRY_POINT_GROUP", "TaskKindError", "available", "get", "register", "resolve"]
@@ -107,7 +108,7 @@ def get(name: str) -> TaskKind:
         return register(resolve(BUILT_IN[name]))
     entry = _entry_points().get(name)
     if entry is None:
-        raise TaskKindError(f"unknown task kind '{name}'; kinds: {', '.join(available())}")
+        raise TaskKindError(unknown_name("task kind", name, available(), "kinds"))
     try:
         target = entry.load()
     except Exception as error:  # a plug-in's own import error, reported with its name
