@@ -1,20 +1,10 @@
-"""Inequality limits of the whole-body planner: support polygon and collision avoidance.
+"""Inequality limits of the whole-body planner, and the IK step's QP that stacks them.
 
-Both are ``mink.Limit`` subclasses, so ``mink.solve_ik`` (or the planner's
-:class:`JointBounds`, which solves the same QP) stacks them with its own limits into
-``G dq <= h``.
-
-* :class:`SupportPolygon` is the convex hull of the feet soles' footprint in the
-  ground plane, with the signed margin of a point to its (shrunk) edges.
-* :class:`SupportPolygonLimit` keeps the whole-robot CoM inside that polygon shrunk
-  by a margin, to first order: ``A (c + J_c dq) <= b`` (a velocity-damper form
-  like mink's ``ConfigurationLimit``).
-* :class:`TiltLimit` and :class:`PelvisHeightLimit` keep the planned posture inside the
-  robot's safe posture (:mod:`executive.world.posture`): the torso's tilt and the pelvis height.
-* :class:`GeomPairCollisionLimit` is mink's ``CollisionAvoidanceLimit`` on explicit,
-  pre-filtered geom pairs, with one addition: a geom may be *attached* to another
-  body (a carried object moves with the hand), so its Jacobian is taken on that
-  body instead of its own free joint.
+Each limit is a ``mink.Limit`` that ``mink.solve_ik`` (or :class:`JointBounds`, which solves the
+same QP with DAQP on the dofs that may move) stacks into ``G dq <= h``: the CoM inside the feet's
+support polygon (:class:`SupportPolygon`, :class:`SupportPolygonLimit`), the robot's safe posture
+(:class:`TiltLimit`, :class:`PelvisHeightLimit`) and collision avoidance between explicit geom
+pairs, a carried object moving with its hand (:class:`GeomPairCollisionLimit`).
 """
 
 from __future__ import annotations
@@ -300,6 +290,21 @@ class JointBounds:
 
         Raises mink.NoSolutionFound when the QP is infeasible.
         """
+        hessian, linear = self._objective(configuration, tasks, damping)
+        matrix, upper, lower, sense = self._rows(configuration, dt, limits, constraints, velocity)
+        x, _obj, exitflag, _info = daqp.solve(hessian, linear, matrix, upper, lower, sense)
+        if exitflag <= 0:
+            raise mink.NoSolutionFound("daqp")
+        out = np.zeros(self.model.nv)
+        out[self.free] = np.asarray(x) / dt
+        return out
+
+    def _objective(
+        self, configuration: mink.Configuration, tasks: Sequence[mink.Task], damping: float
+    ) -> tuple[FloatArray, FloatArray]:
+        """The step QP's Hessian and linear term on the free dofs (mink's ``_compute_qp_objective``:
+        the tasks' ``J^T W^2 J`` and ``-e^T W J`` stacked, plus ``damping`` and the tasks'
+        Levenberg-Marquardt damping on the diagonal)."""
         free, n = self.free, len(self.free)
         weighted: list[FloatArray] = []
         errors: list[FloatArray] = []
@@ -330,6 +335,20 @@ class JointBounds:
         else:
             hessian = np.zeros((n, n))
         hessian.flat[:: n + 1] += damping + mu + diagonal
+        return hessian, linear
+
+    def _rows(
+        self,
+        configuration: mink.Configuration,
+        dt: float,
+        limits: Sequence[mink.Limit],
+        constraints: Sequence[mink.Task],
+        velocity: bool,
+    ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.intc]]:
+        """The step QP's constraints in DAQP's form: the general rows (limits' inequalities, then
+        the constraints' equalities) on the free dofs, the upper and lower bounds of the free
+        dofs and the rows stacked, and each one's sense (equality rows marked)."""
+        free, n = self.free, len(self.free)
         rows: list[FloatArray] = []
         upper: list[FloatArray] = []
         lower, high = self.bounds(configuration.q, dt, velocity)
@@ -358,14 +377,7 @@ class JointBounds:
         matrix = np.ascontiguousarray(np.vstack(rows)) if rows else np.zeros((0, n))
         sense = np.zeros(n + inequalities + equalities, dtype=np.intc)
         sense[n + inequalities :] = 5  # equality (DAQP: active and immutable), as qpsolvers sets it
-        x, _obj, exitflag, _info = daqp.solve(
-            hessian, linear, matrix, np.concatenate(upper), np.concatenate(bounds_low), sense
-        )
-        if exitflag <= 0:
-            raise mink.NoSolutionFound("daqp")
-        out = np.zeros(self.model.nv)
-        out[free] = np.asarray(x) / dt
-        return out
+        return matrix, np.concatenate(upper), np.concatenate(bounds_low), sense
 
 
 # --- collision pairs ------------------------------------------------------------------------
