@@ -2,11 +2,10 @@
 
 from __future__ import annotations
 
-import mujoco
-import numpy as np
 import py_trees
 
 from behaviours.robot_access import RobotBehaviour
+from executive.world.touch import hand_contacts
 
 __all__ = ["Grasp", "Release", "object_contacts"]
 
@@ -14,24 +13,9 @@ Status = py_trees.common.Status
 
 
 def object_contacts(robot: object, side: str, obj: str) -> tuple[int, float]:
-    """How many distinct hand geoms of ``side`` touch ``obj``, and their total normal force (N)."""
-    world = robot.world  # type: ignore[attr-defined]
-    model, data = world.model, world.data
-    hand = set(world.ids.hand_bodies[side])
-    target = world.ids.object_geoms[obj]
-    touching: set[int] = set()
-    total = 0.0
-    wrench = np.zeros(6)
-    for i in range(data.ncon):
-        c = data.contact[i]
-        g1, g2 = int(c.geom1), int(c.geom2)
-        other = g2 if g1 == target else g1 if g2 == target else -1
-        if other < 0 or model.geom_bodyid[other] not in hand:
-            continue
-        mujoco.mj_contactForce(model, data, i, wrench)  # wrench[0]: normal force in the contact frame
-        touching.add(other)
-        total += abs(float(wrench[0]))
-    return len(touching), total
+    """How many distinct hand geoms of ``side`` touch ``obj``, and their total normal force (N)
+    (:func:`executive.world.touch.hand_contacts` of the robot's world)."""
+    return hand_contacts(robot.world, side, obj)  # type: ignore[attr-defined]
 
 
 class Grasp(RobotBehaviour):

@@ -14,6 +14,12 @@ so ticks keep returning RUNNING (the robot holds) while it plans. It then:
 3. ticks the chosen child. If it fails, the selector re-plans from the current
    state (the robot's measured joints, the objects where the robot now observes
    them) without the alternatives already tried, and goes on with the next.
+
+The estimate follows the objects (:mod:`executive.world.observation`): the selector looks
+through the robot and updates the estimate after every failure (``after_failure``; a re-plan
+that follows at once starts from that look), before a re-plan an operator asked for
+(``before_replan``) and when its task ends after acting (``after_task``, unless it has just
+looked), each time with an ``observation`` line in the log.
    A fall or unstable simulation ends the task at once: nothing is re-tried on a
    robot that may not be standing.
 
@@ -53,6 +59,7 @@ from executive.risk.rollouts import PhysicsCheck, PhysicsVerdict, physics_text
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
 from executive.world.model import World
+from executive.world.observation import refresh
 
 __all__ = ["RiskSelector", "task_label"]
 
@@ -151,6 +158,7 @@ class RiskSelector(py_trees.composites.Composite):
         self._future: concurrent.futures.Future[Planned] | None = None
         self._approved: set[str] = set()
         self._by_name: dict[str, py_trees.behaviour.Behaviour] = {}
+        self._last_look: float | None = None  # robot time of the last observation
         self.bb = self.attach_blackboard_client(name=name, namespace=NAMESPACE)
         self.bb.register_key("robot", access=py_trees.common.Access.READ)
         self.bb.register_key("holding", access=py_trees.common.Access.WRITE)
@@ -162,9 +170,13 @@ class RiskSelector(py_trees.composites.Composite):
         return tuple(a.name for a in self.kind.alternatives(self.task, self.estimate))
 
     def measured_state(self) -> tuple[FloatArray, dict[str, tuple[FloatArray, FloatArray]]]:
+        """The robot's measured qpos, and the objects as the estimate has them (name -> pose).
+
+        The estimate follows the robot's observations (:meth:`_observe`); this reads, it does not look.
+        """
         robot = self.bb.robot
-        observe = getattr(robot, "observe_objects", None)
-        return np.array(robot.data.qpos, dtype=float), (observe() if callable(observe) else {})
+        objects = {name: self.estimate.object_pose(name) for name in self.estimate.ids.object_bodies}
+        return np.array(robot.data.qpos, dtype=float), objects
 
     # --- py_trees life cycle --------------------------------------------------------------
 
@@ -216,8 +228,11 @@ class RiskSelector(py_trees.composites.Composite):
         self.chosen, self.chosen_risk, self.approval, self.pending = None, None, None, None
         self.ranking, self.results, self.tried, self._approved = [], [], [], set()
 
-    def _start_planning(self) -> None:
+    def _start_planning(self, observe: str | None = None) -> None:
+        """Plan from the measured joints; ``observe``: first update the estimate, for this reason."""
         self.setup()
+        if observe is not None:
+            self._observe(observe)
         q, observed = self.measured_state()
         q = np.array(q, dtype=float)
         self._refresh_estimate(q, observed)
@@ -261,6 +276,18 @@ class RiskSelector(py_trees.composites.Composite):
             return None
         pos, quat = self.estimate.object_pose(self.task.object)
         return {"name": self.task.object, "position": pos, "quat": quat}
+
+    def _observe(self, reason: str) -> None:
+        """Update the estimate from one look through the robot and log it (``observation``).
+
+        The robot's grasp record (``holding``) loses a hand whose touch no longer holds its object.
+        """
+        robot = self.bb.robot
+        holding = dict(self.bb.holding)
+        fields = refresh(self.estimate, robot, holding, reason)
+        self.bb.holding = {s: o for s, o in holding.items() if self.estimate.held_by(o) == s}
+        self._last_look = robot.time
+        self.log.record("observation", task=self.name, **fields)
 
     def _refresh_estimate(self, q: FloatArray, observed: dict[str, tuple[FloatArray, FloatArray]]) -> None:
         """Objects the robot observes are put where it sees them; the others stay estimated."""
@@ -387,7 +414,7 @@ class RiskSelector(py_trees.composites.Composite):
             self._approved.add(decision.alternative)
             return self._start(decision.alternative)
         if decision.decision == "replan":
-            self._start_planning()
+            self._start_planning(observe="before_replan")
             return Status.RUNNING
         if decision.decision == "deny":  # the risk is refused: the task ends as an abort does
             return self._finish("aborted", {"mode": "denied", "detail": f"denied by {decision.by}"})
@@ -462,10 +489,12 @@ class RiskSelector(py_trees.composites.Composite):
             placed = self._check_placed()
             if placed is not None:
                 self.log.record("failure", task=self.name, alternative=child.name, **placed)
+                self._observe("after_failure")
                 return self._finish("failed", placed)
             return self._finish("success", None)
         failure = self._failure_of(child)
         self.log.record("failure", task=self.name, alternative=child.name, **failure)
+        self._observe("after_failure")  # the re-plan below starts from this look
         if failure["mode"] in TERMINAL_MODES:
             return self._finish("failed", failure)
         left = [a for a in self.names if a not in self.tried]
@@ -517,6 +546,8 @@ class RiskSelector(py_trees.composites.Composite):
         self.outcome = outcome
         if failure is not None:
             self.failure = failure
+        if self.tried and self._last_look != self.bb.robot.time:  # the robot acted: look again
+            self._observe("after_task")
         self.log.record(
             "outcome",
             task=self.name,

@@ -12,6 +12,14 @@ so a grasp can be verified. ``HostRobot.sync()`` copies the measured state into 
 MuJoCo mirror of the scenario (``mj_forward``: kinematics, contacts, forces) and
 runs the failure detectors on it; the host calls it once per control period,
 before :meth:`executive.runtime.mission.Executive.tick`.
+
+The objects a host reports in ``JointState.objects`` are what the robot sees
+(:class:`ObservingRobot`, ``HostRobot.observe_objects``): the executive updates its
+estimate from them at start-up, after every task, after every failure and before every
+re-plan (:mod:`executive.world.observation`), each time with an ``observation`` line in the
+audit log. Report the objects the robot sees now, in the world frame; leave out one it does
+not see (its estimate stays). An object in a hand (the grasp behaviour's record, confirmed
+by ``hand_contacts``) moves with that hand in the estimate.
 """
 
 from __future__ import annotations
@@ -28,7 +36,7 @@ from executive.errors import ExecutiveError
 from executive.monitoring.detectors import Failure, FailureDetector
 from executive.world.model import World
 
-__all__ = ["HostRobot", "JointIO", "JointState", "RobotInterface"]
+__all__ = ["HostRobot", "JointIO", "JointState", "ObservingRobot", "RobotInterface"]
 
 FloatArray = NDArray[np.float64]
 
@@ -52,6 +60,25 @@ class RobotInterface(Protocol):
     def set_gripper(self, side: str, closed: bool) -> None: ...
 
     def hold(self) -> None: ...
+
+
+class ObservingRobot(RobotInterface, Protocol):
+    """A robot that sees the objects (SimulatedRobot and HostRobot have it).
+
+    The executive updates its estimate (:mod:`executive.world.observation`) after every task,
+    after every failure and before every re-plan: it calls ``observe_objects()`` once and logs
+    ``observation_source`` with the result. A robot without these methods sees nothing: its
+    estimate keeps the objects where they were, except those in a hand, which move with it.
+    """
+
+    def observe_objects(self) -> dict[str, tuple[FloatArray, FloatArray]]:
+        """Object name -> (position (m), quaternion w x y z) in the world frame, as seen now."""
+        ...
+
+    @property
+    def observation_source(self) -> dict[str, object]:
+        """A JSON-able description of the poses' origin, e.g. ``{"source": "host"}``."""
+        ...
 
 
 @dataclass(frozen=True)
@@ -140,7 +167,16 @@ class HostRobot:
         return self.detector.check()
 
     def observe_objects(self) -> dict[str, tuple[FloatArray, FloatArray]]:
+        """The object poses of the last :meth:`sync` (``JointState.objects``): name -> (position, quat).
+
+        An object the host did not report is absent (the estimate keeps its own pose of it).
+        """
         return dict(self._seen)
+
+    @property
+    def observation_source(self) -> dict[str, object]:
+        """Where :meth:`observe_objects` comes from, for the log."""
+        return {"source": "host"}
 
     def set_joint_targets(self, q_target: FloatArray, qvel_target: FloatArray | None = None) -> None:
         self.q_target = np.asarray(q_target, dtype=float)

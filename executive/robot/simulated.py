@@ -19,6 +19,7 @@ from numpy.typing import NDArray
 
 from executive.monitoring.detectors import Failure, FailureDetector
 from executive.world.model import World
+from executive.world.observation import SimulatedSensor
 
 __all__ = ["JointTargetController", "SimulatedRobot"]
 
@@ -235,15 +236,25 @@ class StepStats:
 
 
 class SimulatedRobot:
-    """The truth world driven through its actuators, watched by a :class:`FailureDetector`."""
+    """The truth world driven through its actuators, watched by a :class:`FailureDetector`.
+
+    Args:
+        world: the truth world physics runs.
+        control_dt: the control period (s) of :meth:`advance`.
+        detector: the failure detectors (default: a :class:`FailureDetector` of ``world``).
+        sensor: what :meth:`observe_objects` sees (default: the scenario's object uncertainty,
+            seeded with ``trials.seed``).
+    """
 
     def __init__(
         self,
         world: World,
         control_dt: float = 0.02,
         detector: FailureDetector | None = None,
+        sensor: SimulatedSensor | None = None,
     ) -> None:
         self.world = world
+        self.sensor = sensor if sensor is not None else SimulatedSensor(world, world.scenario.trials.seed)
         self.model = world.model
         self.data = world.data
         self.control_dt = control_dt
@@ -268,6 +279,19 @@ class SimulatedRobot:
     @property
     def failure(self) -> Failure | None:
         return self.detector.failure
+
+    def observe_objects(self) -> dict[str, tuple[FloatArray, FloatArray]]:
+        """One look at the objects: their truth poses with the sensor's noise (:class:`SimulatedSensor`).
+
+        Returns:
+            name -> (position (m), quaternion w x y z) of every object of the scene.
+        """
+        return self.sensor.observe()
+
+    @property
+    def observation_source(self) -> dict[str, object]:
+        """Where :meth:`observe_objects` comes from, for the log (the sensor and its sigmas)."""
+        return self.sensor.source
 
     def set_joint_targets(
         self,

@@ -45,6 +45,7 @@ from executive.risk.rollouts import PhysicsCheck
 from executive.robot.simulated import SimulatedRobot
 from executive.scenario.types import Scenario
 from executive.world.model import World, build, sample_perturbation
+from executive.world.observation import SimulatedSensor, refresh
 
 __all__ = ["Executive", "freeze_startup_heap"]
 
@@ -117,7 +118,9 @@ class Executive:
         robot: the host's robot (see :mod:`executive.robot.interface`); None: the executive
             simulates the truth world itself and steps it in :meth:`tick`.
         truth: ``"exact"`` (truth = estimate) or a seed for the sampled truth (default
-            ``trials.seed``); only without ``robot``.
+            ``trials.seed``); only without ``robot``. The seed (``trials.seed`` for ``"exact"``)
+            also seeds the noise of what the simulated robot sees
+            (:class:`executive.world.observation.SimulatedSensor`).
         out: run folder for ``decisions.jsonl``/``summary.json``/plots; None keeps the log in
             memory only. A folder another run has used is refused
             (:class:`executive.decision.audit.RunFolderError`) unless ``resume``.
@@ -171,14 +174,17 @@ class Executive:
         self.estimate: World = build(sc)
         self.truth: World | None = None
         if robot is None:
+            seed = sc.trials.seed if truth in (None, "exact") else int(truth)
             if truth == "exact":
                 self.truth, self.truth_label = build(sc), "exact (truth = estimate)"
             else:
-                seed = sc.trials.seed if truth is None else int(truth)
                 rng = np.random.default_rng(seed)
                 self.truth = build(sc, sample_perturbation(sc, rng), kind="truth")
                 self.truth_label = f"sampled from the scenario's uncertainty, seed {seed}"
-            robot = SimulatedRobot(self.truth, control_dt=control_dt, detector=FailureDetector(self.truth))
+            # The robot sees the objects with the scenario's uncertainty, seeded by the run's seed.
+            sensor = SimulatedSensor(self.truth, seed)
+            detector = FailureDetector(self.truth)
+            robot = SimulatedRobot(self.truth, control_dt=control_dt, detector=detector, sensor=sensor)
             self.owns_physics = True
         else:
             self.truth_label = "the host's robot"
@@ -226,6 +232,8 @@ class Executive:
             tasks=[task_label(t) for t in sc.mission],
             folder=str(self.folder) if self.folder else None,
         )
+        if not self.owns_physics:  # a host's robot: the estimate starts from what it sees
+            self.log.record("observation", task=None, **refresh(self.estimate, robot, {}, "at_start"))
 
     def _install(self) -> None:
         install(self.robot)

@@ -28,6 +28,7 @@ from executive.robot.profile_types import RobotProfile
 from executive.scenario.types import Body, Scenario
 
 __all__ = [
+    "Grip",
     "Perturbation",
     "World",
     "WorldIds",
@@ -130,6 +131,20 @@ class WorldIds:
 
 
 @dataclass
+class Grip:
+    """How a hand holds an object: the object's pose in the hand site's frame.
+
+    ``position`` (m) and ``quat`` (w x y z) are the mean of ``looks`` measurements (one per
+    observation while held); ``looks`` 0: not measured, the object assumed at the site.
+    """
+
+    side: str
+    position: FloatArray
+    quat: FloatArray
+    looks: int
+
+
+@dataclass
 class World:
     """A compiled world: MuJoCo model and data plus what the executive needs to know of them."""
 
@@ -140,9 +155,26 @@ class World:
     kind: Literal["estimate", "truth"]
     perturbation: Perturbation
     ids: WorldIds
+    #: object name -> side of the hand that holds it (kept by :mod:`executive.world.observation`)
+    held: dict[str, str] = field(default_factory=dict)
+    #: object name -> how the holding hand holds it (kept with ``held``)
+    grips: dict[str, Grip] = field(default_factory=dict)
+
+    def held_by(self, obj: str) -> str | None:
+        """The side of the hand that holds ``obj`` (None: no hand holds it).
+
+        Args:
+            obj: an object of the scene.
+
+        Returns:
+            ``"left"``/``"right"`` (a side of the robot's profile) or None.
+        """
+        return self.held.get(obj)
 
     def reset(self) -> None:
-        """Put the world in its home state: the robot's standing keyframe, objects at rest."""
+        """Put the world in its home state: the robot's standing keyframe, objects at rest, none held."""
+        self.held.clear()
+        self.grips.clear()
         mujoco.mj_resetDataKeyframe(self.model, self.data, self.ids.keyframe)
         mujoco.mj_forward(self.model, self.data)
 
