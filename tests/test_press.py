@@ -12,7 +12,9 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import json
 import math
+from pathlib import Path
 from typing import Any
 
 import mujoco
@@ -20,9 +22,11 @@ import numpy as np
 import pytest
 
 import behaviours.press as press_behaviour
+from executive.decision.assessment import concatenate
 from executive.errors import ScenarioError
 from executive.monitoring.detectors import FailureDetector
 from executive.planning.planner import Planner
+from executive.runtime.mission import Executive
 from executive.runtime.runner import execute_plan
 from executive.scenario import from_dict
 from executive.scenario.types import Body, Scenario
@@ -247,3 +251,42 @@ def test_only_the_pressing_hand_may_touch_the_panel(planner: Planner, estimate: 
     other.set_phase(grasping=("left", "panel"))
     found = other.check()
     assert found is not None and found.mode == "collision" and "panel" in found.detail
+
+
+def test_the_executive_presses_and_logs_pressed(tmp_path: Path) -> None:
+    doc = copy.deepcopy(DOC)
+    doc["risk"] = {"rollouts": {"count": 0}}
+    executive = Executive(from_dict(doc), approval="deny", truth="exact", out=tmp_path / "run")
+    summary = executive.run()
+    assert summary["outcome"] == "success", summary
+    lines = [json.loads(line) for line in (tmp_path / "run" / "decisions.jsonl").read_text().splitlines()]
+    plan = next(e for e in lines if e["kind"] == "plan" and e["name"] == "right")
+    assert plan["feasible"] and plan["risk"]["collision"] < 1e-3  # the hand on the panel is planned
+    (pressed,) = [e for e in lines if e["kind"] == "pressed"]
+    assert pressed["target"] == "panel" and pressed["commanded_n"] == 15.0 and pressed["held_s"] >= 1.0
+    assert 13.5 <= pressed["min_n"] and pressed["max_n"] <= 16.5
+
+
+def test_the_press_reaction_moves_the_zmp(planner: Planner) -> None:
+    fall = pytest.importorskip("executive.risk.fall")
+    if not hasattr(fall, "ExternalForce"):
+        pytest.skip("the fall model takes no external force yet")
+    world = planner.world
+    task = world.scenario.mission[0]
+    plan = plan_alternative(planner, world, task, "right")
+    whole = concatenate(plan.ordered_trajectories(), plan.name)
+    forces, points = [], []
+    for step in plan.steps:  # Step.force on the press step's knots, as concatenate orders them
+        traj = plan.trajectories[step.name]
+        skip = 1 if forces else 0
+        force = step.force if step.kind == "press" and step.force is not None else (0.0, 0.0, 0.0)
+        forces.append(np.tile(force, (len(traj.times) - skip, 1)))
+        points.append(traj.hand_paths[step.side][skip:])
+    external = fall.ExternalForce(np.concatenate(forces), np.concatenate(points))
+    risk = world.scenario.risk
+    pressed = fall.assess_fall(world, whole, risk, world.scenario.uncertainty, external=external)
+    # ZMP with the panel pushing the hand up by F at p: zmp - c = F (c - p) / (m g - F) (Kajita 2014, 3.2).
+    press = plan.trajectories["right.press"]
+    weight = world.robot_mass * -world.model.opt.gravity[2]
+    lever = np.linalg.norm(press.com_path[:, :2] - press.hand_paths["right"][:, :2], axis=1)
+    assert pressed.details["max_zmp_shift"] == pytest.approx(15.0 * lever.max() / (weight - 15.0), rel=0.02)

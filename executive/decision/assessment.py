@@ -118,16 +118,20 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
     whole = concatenate(ordered, plan.name)
     fall = assess_fall(world, whole, scenario.risk, scenario.uncertainty)
     collision = _collision(collision_model, plan)
-    grasp_step = next(s for s in plan.steps if s.kind == "grasp")
-    approach = [s for s in plan.steps[: plan.steps.index(grasp_step)] if s.name in plan.trajectories][-1]
-    down = [
-        plan.trajectories[s.name].qpos
-        for s in plan.steps[: plan.steps.index(grasp_step)]
-        if s.name in plan.trajectories and s.side == grasp_step.side
-    ]
-    grasp = _grasp(
-        world, grasp_step.side, plan.task.object, plan.trajectories[approach.name], np.concatenate(down)
-    )
+    grasp_step = next((s for s in plan.steps if s.kind == "grasp"), None)
+    if grasp_step is None:  # a task that takes nothing in hand (a press)
+        drop = scenario.risk.severity.drop
+        grasp = RiskReport("grasp", 0.0, (0.0, 0.0), drop, 0.0, details={"grasp": "none"})
+    else:
+        approach = [s for s in plan.steps[: plan.steps.index(grasp_step)] if s.name in plan.trajectories][-1]
+        down = [
+            plan.trajectories[s.name].qpos
+            for s in plan.steps[: plan.steps.index(grasp_step)]
+            if s.name in plan.trajectories and s.side == grasp_step.side
+        ]
+        grasp = _grasp(
+            world, grasp_step.side, plan.task.object, plan.trajectories[approach.name], np.concatenate(down)
+        )
     hold = assess_hold(world, plan, scenario.risk, scenario.uncertainty)
     return combine([collision, fall, drop_union(grasp, hold)], scenario.risk)
 
