@@ -48,7 +48,9 @@ Allowed contacts
   (``set_phase`` declares the phase; each call replaces the previous one);
 - objects with each other while neither is carried (a stack);
 - an object with the hand geoms (the subtree of that side's hand body) of a side
-  that is grasping (closing on) or carrying it;
+  that is grasping (closing on), carrying or pushing it (a pushed object slides on the
+  table away from the hand as it likes: no hold distance; it touching another object
+  is a collision);
 - an obstacle with the hand geoms of a side that presses it (``set_phase(grasping=(side,
   obstacle))``, a press task's hold); any other contact of that hand is still a collision;
 - the robot's own self-contacts: never a failure (the embedded humanoid excludes
@@ -331,6 +333,7 @@ class FailureDetector:
         self._grasping: tuple[str, str] | None = None
         self._placing: str | None = None
         self._approaching: tuple[str, str] | None = None
+        self._pushing: tuple[str, str] | None = None
         self.set_phase()
 
     # --- phase ---------------------------------------------------------------------------
@@ -342,6 +345,7 @@ class FailureDetector:
         grasping: tuple[str, str] | None = None,
         placing: str | None = None,
         approaching: tuple[str, str] | None = None,
+        pushing: tuple[str, str] | None = None,
     ) -> None:
         """Declare what the behaviour does now; each call replaces the previous phase.
 
@@ -349,12 +353,14 @@ class FailureDetector:
         touch now (closing on it), or (side, obstacle) it presses; placing: the object allowed
         to touch the table now;
         approaching: (side, object) the open hand is moving onto to grasp: a forceful touch
-        now is a misaligned grasp (mode ``drop``), not a collision.
+        now is a misaligned grasp (mode ``drop``), not a collision; pushing: (side, object) the
+        hand slides along the table: that hand may touch it, it may touch the table and slide
+        away from the hand (no hold distance), and it touching another object is a collision.
         A handover carries with one side and grasps with the other.
         """
         codes = self._base_codes.copy()
         put = self._put
-        for pair in (carried, grasping, approaching):
+        for pair in (carried, grasping, approaching, pushing):
             if pair is not None:
                 self._check_side(pair[0])
                 if pair is not grasping or pair[1] not in self._obstacle_geom:  # a press touches an obstacle
@@ -379,11 +385,17 @@ class FailureDetector:
         if placing is not None:
             g = np.array([self._object_geom[placing]], dtype=np.int64)
             put(g, self._table, _ALLOWED, codes)
+        if pushing is not None:
+            side, name = pushing
+            g = np.array([self._object_geom[name]], dtype=np.int64)
+            others = np.array([v for k, v in self._object_geom.items() if k != name], dtype=np.int64)
+            put(g, others, _COLLISION, codes)
+            put(g, self._hand_geoms[side], _ALLOWED, codes)
         self._codes = codes
         self._code_rows = codes.tolist()
         self._quiet_pairs = b""  # the codes changed: classify the next contacts afresh
         self._carried, self._grasping, self._placing = carried, grasping, placing
-        self._approaching = approaching
+        self._approaching, self._pushing = approaching, pushing
         # Forbidden pairs for the clearance (floor excluded: its distance says nothing); +inf
         # on the pairs that may touch, so they never beat the best clearance.
         forbidden = codes[np.ix_(self._clr_movers, self._clr_things)] == _COLLISION  # not _MISGRASP
@@ -399,6 +411,7 @@ class FailureDetector:
             "grasping": self._grasping,
             "placing": self._placing,
             "approaching": self._approaching,
+            "pushing": self._pushing,
         }
 
     # --- results -------------------------------------------------------------------------

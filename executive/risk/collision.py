@@ -430,8 +430,8 @@ class CollisionModel:
         carried: tuple[str, str] | None,
     ) -> frozenset[tuple[str, str]]:
         """Pairs a motion step may bring into contact: the hand the object it grasps (a step whose
-        ``allow_contact`` names it), the hand what it carries, and a carried object its support
-        while lifted or placed. The other hand near a carried object (a handover's receiver
+        ``allow_contact`` names it), the hand what it carries (or pushes), and a carried object its
+        support while lifted, placed or pushed. The other hand near a carried object (a handover's receiver
         rising beside it) is not allowed: the failure detector calls that touch a collision."""
         allow: set[tuple[str, str]] = set()
         if obj in allow_contact:
@@ -443,7 +443,7 @@ class CollisionModel:
             pressed -= set(self.setup.object_geoms.values())
             hand = self.setup.hand_geoms.get(side, ())
             allow |= {(self._geom_names[h], self._geom_names[g]) for h in hand for g in pressed}
-        if kind in ("lift", "place"):
+        if kind in ("lift", "place", "push"):  # a pushed object slides on its support
             allow |= self.support_allow(obj)
         return frozenset(allow)
 

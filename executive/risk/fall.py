@@ -37,6 +37,7 @@ P(fall) = 1 - (1 - P_support)(1 - P_pelvis)(1 - P_tilt), and the same for both b
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Literal
 
 import mujoco
@@ -46,6 +47,7 @@ from scipy.special import owens_t
 
 from executive.planning.timing import Trajectory
 from executive.risk.fall_batch import (
+    KnotPolygons,
     edge_probabilities_batch,
     halfplanes_batch,
     hulls,
@@ -67,11 +69,13 @@ from executive.world.polygon import (
 from executive.world.posture import standing_pelvis_height
 
 __all__ = [
+    "ExternalForce",
     "assess_fall",
     "capture_point",
     "clip_polygon",
     "convex_hull",
     "edge_probabilities",
+    "force_scale_distribution",
     "halfplanes",
     "persistent_bias_probability",
     "polygon_area",
@@ -80,6 +84,7 @@ __all__ = [
     "seed_fall_risk",
     "signed_margin",
     "support_polygon",
+    "zero_moment_points",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -479,17 +484,85 @@ def _posture_probability(
     }
 
 
-def assess_fall(
-    world: World, trajectory: Trajectory, risk_config: RiskConfig, uncertainty: Uncertainty
-) -> RiskReport:
-    """Fall risk of a trajectory on ``world``'s model (see the module doc for the formulas).
+@dataclass(frozen=True)
+class ExternalForce:
+    """The force a hand exerts on the world at each knot (a push or a press); the robot feels its reaction.
 
-    Per knot: the robot's CoM (recomputed with MuJoCo from the knot's qpos, robot bodies only),
-    the support polygon from the foot geometry, the signed margin, the seed's circle risk, the
-    exact and Boole probabilities that the true CoM (N(CoM, uncertainty.com^2 I)) is outside,
-    and the capture point's margin (finite-difference CoM velocity). The knots are evaluated
-    together (:mod:`executive.risk.fall_batch`); the numbers are those of the per-knot functions.
+    ``force``: (K, 3) N in the world frame, what the hand applies (:attr:`executive.tasks.steps.Step.force`;
+    zero rows where it applies none); ``point``: (K, 3) m, where it acts (the hand site).
+    ``mass_sigma``, ``friction_sigma``: relative 1-sigma errors of the object's mass and friction;
+    the force scales with their product (Coulomb: ``mu m g``), each factor floored at
+    :data:`SCALE_FLOOR` as the truth sampler draws them. ``limit``: the largest force (N) the arm
+    can exert (:func:`executive.risk.push.arm_force_capacity`); a push that needs more stalls,
+    and the robot feels no more than that.
     """
+
+    force: FloatArray
+    point: FloatArray
+    mass_sigma: float = 0.0
+    friction_sigma: float = 0.0
+    limit: float = float("inf")
+
+
+#: The truth sampler's floor on its mass and friction factors (executive.world.model.sample_perturbation).
+SCALE_FLOOR = 0.2
+#: Gauss-Hermite order per factor of the force's scale, and the grid P(fall | scale) is evaluated on.
+_SCALE_ORDER = 40
+_SCALE_GRID = 33
+
+
+def zero_moment_points(
+    coms: FloatArray, force: FloatArray, point: FloatArray, mass: float, gravity: float, ground: float
+) -> FloatArray:
+    """ZMP (K, 2) of a robot holding still while its hand exerts ``force`` (K, 3) at ``point`` (K, 3).
+
+    The reaction ``f = -force`` acts on the robot; the moments about the ZMP on the ground balance:
+    ``zmp (m g - f_z) = m g c_xy + h f_xy - p_xy f_z`` with ``h = p_z - ground``. A horizontal
+    push F at hand height h moves the ZMP by ``-F h / (m g)``, against the push.
+    """
+    # Kajita et al., Introduction to Humanoid Robotics (Springer 2014), sec. 3.2: ZMP with external forces.
+    f = -np.asarray(force, dtype=float)
+    p = np.asarray(point, dtype=float)
+    weight = mass * gravity
+    height = p[:, 2] - ground
+    num = weight * coms[:, :2] + height[:, None] * f[:, :2] - p[:, :2] * f[:, 2:3]
+    return np.asarray(num / (weight - f[:, 2:3]), dtype=float)
+
+
+def force_scale_distribution(mass_sigma: float, friction_sigma: float) -> tuple[FloatArray, FloatArray]:
+    """Nodes and weights of the force's scale ``max(.2, 1 + s_m z) max(.2, 1 + s_f z')``, z, z' ~ N(0, 1).
+
+    Gauss-Hermite (probabilists') in each factor; one node of weight 1 when both sigmas are 0.
+    """
+    x, w = np.polynomial.hermite_e.hermegauss(_SCALE_ORDER)
+    w = w / np.sum(w)
+
+    def factor(sigma: float) -> tuple[FloatArray, FloatArray]:
+        if sigma <= 0.0:
+            return np.ones(1), np.ones(1)
+        return np.maximum(SCALE_FLOOR, 1.0 + sigma * x), w
+
+    a, wa = factor(mass_sigma)
+    b, wb = factor(friction_sigma)
+    return np.outer(a, b).ravel(), np.outer(wa, wb).ravel()
+
+
+@dataclass(frozen=True)
+class _Knots:
+    """Per knot of a trajectory: CoM, the feet's support polygons, pelvis height, torso uprightness."""
+
+    times: FloatArray
+    coms: FloatArray  # (K, 3)
+    polygons: KnotPolygons
+    pelvis: FloatArray
+    upright: FloatArray  # the torso z axis' vertical component
+    ground: float
+    gravity: float
+    mass: float  # the robot's
+
+
+def _knots(world: World, trajectory: Trajectory) -> _Knots:
+    """The robot's CoM, support polygon and posture at every knot (MuJoCo kinematics, robot bodies only)."""
     model = world.model
     times = np.asarray(trajectory.times, dtype=float)
     qpos = np.asarray(trajectory.qpos, dtype=float)
@@ -498,20 +571,14 @@ def assess_fall(
             f"assess_fall: trajectory '{trajectory.name}' has qpos {qpos.shape} and {len(times)} "
             f"times; the world's model needs (K, {model.nq}) with K = len(times) >= 1"
         )
-    cfg = risk_config.fall
-    radius = cfg.circle_radius if cfg.circle_radius is not None else cfg.sigmas * uncertainty.com
-    cov = _covariance(_com_covariance(uncertainty))
     data = mujoco.MjData(model)
-    base = world.ids.base_body
-    gravity = float(np.linalg.norm(model.opt.gravity))
-
+    base, torso = world.ids.base_body, world.ids.torso_body
     count = len(times)
     feet = [g for gs in world.ids.foot_geoms.values() for g in gs]
     coms = np.zeros((count, 3))
     xpos = np.zeros((count, len(feet), 3))
     xmat = np.zeros((count, len(feet), 9))
     pelvis, upright = np.zeros(count), np.zeros(count)
-    torso = world.ids.torso_body
     for k in range(count):
         data.qpos[:] = qpos[k]
         mujoco.mj_kinematics(model, data)
@@ -524,90 +591,243 @@ def assess_fall(
     ground = _ground_height(world, data)
     points = _foot_points_batch(world, xpos, xmat.reshape(count, len(feet), 3, 3))
     polygons = hulls(points[..., :2], points[..., 2] <= ground + 0.01)
-    velocity = np.asarray(np.gradient(coms, times, axis=0)) if count >= 2 else np.zeros_like(coms)
-    height = coms[:, 2] - ground
+    gravity = float(np.linalg.norm(model.opt.gravity))
+    mass = float(model.body_subtreemass[base])
+    return _Knots(times, coms, polygons, pelvis, upright, ground, gravity, mass)
+
+
+def _capture_points(knots: _Knots) -> FloatArray:
+    """Capture point (K, 2) of each knot, the CoM velocity by finite differences."""
+    coms, times, gravity = knots.coms, knots.times, knots.gravity
+    velocity = np.asarray(np.gradient(coms, times, axis=0)) if len(times) >= 2 else np.zeros_like(coms)
+    height = coms[:, 2] - knots.ground
     if gravity <= 0.0 or np.any(height <= 0.0):
         raise ValueError(
             f"capture_point: need g > 0 and the CoM above the ground, got g={gravity}, "
             f"h={float(np.min(height))}"
         )
-    xi = coms[:, :2] + velocity[:, :2] / np.sqrt(gravity / height)[:, None]
+    return np.asarray(coms[:, :2] + velocity[:, :2] / np.sqrt(gravity / height)[:, None], dtype=float)
 
-    margins, capture, per_knot = np.zeros(count), np.zeros(count), np.zeros(count)
-    lower_k, upper_k = np.zeros(count), np.zeros(count)
+
+def _per_knot(
+    polygons: KnotPolygons, mus: FloatArray, xi: FloatArray, cov: FloatArray
+) -> dict[str, FloatArray]:
+    """Per knot: signed margin of ``mus``, capture margin of ``xi``, exact and Boole P(outside)."""
+    count = len(mus)
+    out = {name: np.zeros(count) for name in ("margin", "capture", "probability", "lower", "upper")}
     for knots, verts in polygons.groups.values():
-        mu = coms[knots, :2]
-        margins[knots] = signed_margin_batch(verts, mu)
-        capture[knots] = signed_margin_batch(verts, xi[knots])
+        mu = mus[knots]
+        out["margin"][knots] = signed_margin_batch(verts, mu)
+        out["capture"][knots] = signed_margin_batch(verts, xi[knots])
         p = edge_probabilities_batch(verts, mu, cov)
-        lower_k[knots] = np.max(p, axis=1)
-        upper_k[knots] = np.minimum(1.0, np.sum(p, axis=1))
-        per_knot[knots] = probability_outside_batch(verts, mu, cov)
-    seed = _seed_batch(margins, radius, cfg.exponent)
+        out["lower"][knots] = np.max(p, axis=1)
+        out["upper"][knots] = np.minimum(1.0, np.sum(p, axis=1))
+        out["probability"][knots] = probability_outside_batch(verts, mu, cov)
+    return out
 
-    # Persistent bias (module doc): S = P_0 - mu_0 cut by every other knot's shifted half-planes.
-    a_parts, b_parts = [], []
+
+def _support_probability(
+    polygons: KnotPolygons, mus: FloatArray, cov: FloatArray
+) -> tuple[float, float, float]:
+    """P(the persistent bias takes some knot's support point outside its polygon), with bounds.
+
+    S = P_0 - mu_0 cut by every other knot's shifted half-planes (module doc); the point estimate
+    is clipped into [max over knots of the exact and Boole-lower per-knot P, the Boole sum over S].
+    """
+    a_parts, b_parts, worst = [], [], 0.0
     for knots, verts in polygons.groups.values():
         a, b = halfplanes_batch(verts)
         a_parts.append(a.reshape(-1, 2))
-        b_parts.append((b - np.einsum("nij,nj->ni", a, coms[knots, :2])).reshape(-1))
+        b_parts.append((b - np.einsum("nij,nj->ni", a, mus[knots])).reshape(-1))
+        worst = max(worst, float(np.max(probability_outside_batch(verts, mus[knots], cov))))
+        worst = max(worst, float(np.max(edge_probabilities_batch(verts, mus[knots], cov))))
     safe = _intersect_halfplanes(
-        polygons.polygon(0) - coms[0, :2], np.concatenate(a_parts), np.concatenate(b_parts)
+        polygons.polygon(0) - mus[0], np.concatenate(a_parts), np.concatenate(b_parts)
     )
     if safe is None:
-        probability, boole = 1.0, 1.0
-    else:
-        zero = np.zeros(2)
-        probability = probability_outside(safe, zero, cov)
-        boole = union_bounds(edge_probabilities(safe, zero, cov))[1]
-    worst = float(np.max(per_knot))
-    lower_bound = max(worst, float(np.max(lower_k)))
-    upper_bound = max(boole, lower_bound)
-    probability = float(np.clip(probability, lower_bound, upper_bound))
-    posture = _posture_probability(world, pelvis, upright, float(uncertainty.com))
+        return 1.0, 1.0, 1.0
+    zero = np.zeros(2)
+    probability = probability_outside(safe, zero, cov)
+    upper = max(union_bounds(edge_probabilities(safe, zero, cov))[1], worst)
+    return float(np.clip(probability, worst, upper)), worst, upper
 
-    def with_posture(p: float) -> float:
-        # 1 - prod(1 - p_i) as -expm1(sum log1p(-p_i)): a 1e-30 keeps its digits.
-        terms = np.array([p, posture["probability_pelvis"], posture["probability_tilt"]])
-        with np.errstate(divide="ignore"):
-            return float(-np.expm1(np.sum(np.log1p(-terms))))
 
-    k_min, k_cap, k_worst = int(np.argmin(margins)), int(np.argmin(capture)), int(np.argmax(per_knot))
+def _under_force(
+    knots: _Knots, external: ExternalForce | None, cov: FloatArray
+) -> tuple[tuple[float, float, float], dict[str, float]]:
+    """The support probability (and bounds) over the force's scale, and the force's numbers.
+
+    Without a force: the CoM's. With one: the ZMP's at each scale of the force (it grows with the
+    object's mass and friction factors), P(fall | scale) on a grid between the extreme scales,
+    interpolated at the scale distribution's nodes and averaged with their weights.
+    """
+    if external is None or not np.any(external.force):
+        return _support_probability(knots.polygons, knots.coms[:, :2], cov), {}
+    nodes, weights = force_scale_distribution(external.mass_sigma, external.friction_sigma)
+    grid = np.linspace(float(np.min(nodes)), float(np.max(nodes)), _SCALE_GRID if len(nodes) > 1 else 1)
+    values = np.array(
+        [_support_probability(knots.polygons, _zmps(knots, external, float(scale)), cov) for scale in grid]
+    )
+    expected = tuple(float(np.sum(weights * np.interp(nodes, grid, values[:, j]))) for j in range(3))
+    magnitude = np.linalg.norm(external.force, axis=1)
+    shift = np.linalg.norm(_zmps(knots, external, 1.0) - knots.coms[:, :2], axis=1)
+    facts = {
+        "max_external_force": float(np.max(magnitude)),
+        "max_zmp_shift": float(np.max(shift)),
+        "force_scale_sigma": float(np.sqrt(np.sum(weights * nodes**2) - np.sum(weights * nodes) ** 2)),
+        "probability_support_nominal_force": float(values[int(np.argmin(np.abs(grid - 1.0))), 0]),
+        "arm_force_limit": float(external.limit),
+        "force_to_tip": _tipping_force(knots, external),
+    }
+    return (expected[0], expected[1], expected[2]), facts
+
+
+def _tipping_force(knots: _Knots, external: ExternalForce) -> float:
+    """N of the largest hand force (uncapped) that takes the ZMP to the support polygon's edge.
+
+    Bisection on the force's scale (the margin falls as the push grows); inf when even 1000
+    times the push leaves the ZMP inside.
+    """
+    uncapped = ExternalForce(external.force, external.point)
+
+    def margin(scale: float) -> float:
+        mus = _zmps(knots, uncapped, scale)
+        return min(
+            float(np.min(signed_margin_batch(verts, mus[idx])))
+            for idx, verts in knots.polygons.groups.values()
+        )
+
+    low, high = 0.0, 1000.0
+    if margin(high) > 0.0:
+        return float("inf")
+    if margin(low) <= 0.0:
+        return 0.0
+    for _ in range(50):
+        mid = 0.5 * (low + high)
+        low, high = (mid, high) if margin(mid) > 0.0 else (low, mid)
+    return float(high * np.max(np.linalg.norm(external.force, axis=1)))
+
+
+def _zmps(knots: _Knots, external: ExternalForce, scale: float) -> FloatArray:
+    """The ZMPs with the force scaled by ``scale``, each knot's capped at the arm's ``limit``."""
+    force = scale * external.force
+    magnitude = np.linalg.norm(force, axis=1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cap = np.where(magnitude > external.limit, external.limit / magnitude, 1.0)
+    return zero_moment_points(
+        knots.coms, force * cap[:, None], external.point, knots.mass, knots.gravity, knots.ground
+    )
+
+
+def _with_posture(p: float, posture: dict[str, float]) -> float:
+    """1 - (1 - p)(1 - P_pelvis)(1 - P_tilt), as -expm1(sum log1p(-p_i)): a 1e-30 keeps its digits."""
+    terms = np.array([p, posture["probability_pelvis"], posture["probability_tilt"]])
+    with np.errstate(divide="ignore"):
+        return float(-np.expm1(np.sum(np.log1p(-terms))))
+
+
+def assess_fall(
+    world: World,
+    trajectory: Trajectory,
+    risk_config: RiskConfig,
+    uncertainty: Uncertainty,
+    external: ExternalForce | None = None,
+) -> RiskReport:
+    """Fall risk of a trajectory on ``world``'s model (see the module doc for the formulas).
+
+    Per knot: the robot's CoM (recomputed with MuJoCo from the knot's qpos, robot bodies only),
+    the support polygon from the foot geometry, the signed margin, the seed's circle risk, the
+    exact and Boole probabilities that the true support point (N(., uncertainty.com^2 I)) is
+    outside, and the capture point's margin (finite-difference CoM velocity). The knots are
+    evaluated together (:mod:`executive.risk.fall_batch`).
+
+    Args:
+        world: the estimate world whose model the trajectory's qpos index.
+        trajectory: the motion (e.g. an alternative's steps concatenated).
+        risk_config: the scenario's ``risk`` (the seed circle's radius and exponent, the severity).
+        uncertainty: the scenario's 1-sigma errors (the CoM's).
+        external: the forces the hands exert per knot: the support point is then the ZMP
+            (:func:`zero_moment_points`) instead of the CoM, and the probability is averaged
+            over the force's uncertain scale (:func:`force_scale_distribution`).
+
+    Returns:
+        The ``fall`` report; its details name the minimum margin, the posture's part and, with a
+        force, the largest force and ZMP shift.
+
+    Raises:
+        ValueError: a trajectory whose qpos do not fit the model, or a CoM not above the ground.
+    """
+    cfg = risk_config.fall
+    radius = cfg.circle_radius if cfg.circle_radius is not None else cfg.sigmas * uncertainty.com
+    cov = _covariance(_com_covariance(uncertainty))
+    knots = _knots(world, trajectory)
+    xi = _capture_points(knots)
+    mus = knots.coms[:, :2] if external is None else _zmps(knots, external, 1.0)
+    per = _per_knot(knots.polygons, mus, xi, cov)
+    (probability, lower, upper), force_facts = _under_force(knots, external, cov)
+    posture = _posture_probability(world, knots.pelvis, knots.upright, float(uncertainty.com))
+    return _report(
+        world,
+        trajectory,
+        risk_config,
+        knots,
+        per,
+        (probability, lower, upper),
+        radius,
+        {**posture, **force_facts, "com_sigma": float(uncertainty.com)},
+    )
+
+
+def _report(
+    world: World,
+    trajectory: Trajectory,
+    risk_config: RiskConfig,
+    knots: _Knots,
+    per: dict[str, FloatArray],
+    support: tuple[float, float, float],
+    radius: float,
+    facts: dict[str, float],
+) -> RiskReport:
+    """The fall report from the per-knot numbers and the support probability with its bounds."""
+    times, coms, margins = knots.times, knots.coms, per["margin"]
+    seed = _seed_batch(margins, radius, risk_config.fall.exponent)
+    k_min, k_cap = int(np.argmin(margins)), int(np.argmin(per["capture"]))
+    k_worst = int(np.argmax(per["probability"]))
     mismatch = (
         float(np.max(np.linalg.norm(np.asarray(trajectory.com_path, dtype=float) - coms, axis=1)))
         if np.shape(trajectory.com_path) == coms.shape
         else float("nan")
     )
+    probability, lower, upper = support
     return RiskReport(
         mode="fall",
-        probability=with_posture(probability),
-        probability_bounds=(with_posture(lower_bound), with_posture(upper_bound)),
+        probability=_with_posture(probability, facts),
+        probability_bounds=(_with_posture(lower, facts), _with_posture(upper, facts)),
         severity=float(risk_config.severity.fall),
         seed_score=float(np.max(seed)),
         times=times.copy(),
         traces={
             "margin": margins,
             "seed_risk": seed,
-            "probability": per_knot,
-            "probability_lower": lower_k,
-            "probability_upper": upper_k,
-            "capture_margin": capture,
+            "probability": per["probability"],
+            "probability_lower": per["lower"],
+            "probability_upper": per["upper"],
+            "capture_margin": per["capture"],
             "com_x": coms[:, 0].copy(),
             "com_y": coms[:, 1].copy(),
-            "pelvis_height": pelvis,
+            "pelvis_height": knots.pelvis,
         },
         details={
             "min_margin": float(margins[k_min]),
             "min_margin_time": float(times[k_min]),
-            "min_capture_margin": float(capture[k_cap]),
+            "min_capture_margin": float(per["capture"][k_cap]),
             "min_capture_margin_time": float(times[k_cap]),
-            "probability_worst_knot": worst,
+            "probability_worst_knot": float(per["probability"][k_worst]),
             "worst_knot_time": float(times[k_worst]),
             "circle_radius": float(radius),
-            "com_sigma": float(uncertainty.com),
             "com_path_mismatch": mismatch,
-            "support_area": polygon_area(polygons.polygon(k_min)),
+            "support_area": polygon_area(knots.polygons.polygon(k_min)),
             "probability_support": probability,
-            **posture,
+            **facts,
         },
     )

@@ -1,0 +1,45 @@
+"""Pushing: a hand, jaws closed, comes down behind an object and slides it along the table."""
+
+from __future__ import annotations
+
+import py_trees
+
+from behaviours.move_hand import MoveHand
+
+__all__ = ["Push"]
+
+Status = py_trees.common.Status
+
+
+class Push(MoveHand):
+    """Follow a push step's trajectory with the jaws closed, touching the object it pushes.
+
+    ``touching`` is the (side, object) pair of the push. The detectors are told so
+    (``set_phase(pushing=...)``): that hand may touch the object and the object slides on the
+    table, away from the hand as it likes (no hold distance: it is not held); the object
+    running into anything else, or the robot touching anything else, is still a failure.
+    A hand that stalls behind an object too heavy for the arm ends short of its planned end
+    and fails as any move does, its message starting ``drop: the push stalled``: the object
+    is not brought to its target (the drop mode), the robot stands.
+    """
+
+    phase = "push"
+
+    def initialise(self) -> None:
+        super().initialise()
+        if self.touching is not None:
+            self._robot.set_gripper(self.touching[0], closed=True)
+
+    def update(self) -> Status:
+        status = super().update()
+        if status == Status.FAILURE and self._robot.failure is None and self.trajectory.carried is not None:
+            # The hand stopped behind an object it could not slide: the task failed (its object is
+            # not at the target: the drop mode, as a misplacement), not the robot.
+            obj = self.trajectory.carried[1]
+            self.feedback_message = f"drop: the push stalled behind {obj}: {self.feedback_message}"
+        return status
+
+    def _set_detector_phase(self) -> None:
+        holding: dict[str, str] = self.bb.holding
+        carried = next(iter(holding.items()), None) if holding else None
+        self.robot.detector.set_phase(carried=carried, pushing=self.touching)

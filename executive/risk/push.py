@@ -1,0 +1,256 @@
+"""Push risk: the force a push needs, the force the arm can exert, and what that does to balance.
+
+A push step (:class:`executive.tasks.steps.Step` with ``force``) slides an object by Coulomb
+friction: the hand must exert ``F = mu m g`` (:func:`executive.tasks.push.push_force`). The
+truth's mass and friction factors (``uncertainty.object_mass``, ``uncertainty.friction``, each
+``max(0.2, 1 + s z)`` as the truth sampler draws them) scale it.
+
+* Stall: an arm holds a hand force ``F u`` only while every arm and waist actuator can supply
+  ``tau = g(q) + J^T F u`` (quasi-static; ``J`` the hand site's translational Jacobian, ``g``
+  the gravity torques, MuJoCo ``mj_jacSite`` and ``qfrc_bias`` at rest) within its
+  ``actuator_forcerange``. The largest such ``F`` over the push's knots is the arm's capacity;
+  a push that needs more stalls: the hand stops behind the object, the task fails (its drop
+  mode: the object does not reach its target), and the robot never feels more than that.
+  P(stall) = P(scale F > capacity) over the scale's distribution.
+* Balance: the reaction of the force the arm actually exerts, ``min(scale F, capacity)``, moves
+  the zero-moment point (:func:`executive.risk.fall.zero_moment_points`); the fall model takes it
+  per knot (:class:`executive.risk.fall.ExternalForce` with ``limit`` the capacity).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import mujoco
+import numpy as np
+from numpy.typing import NDArray
+
+from executive.monitoring.detectors import DetectorThresholds
+from executive.risk.fall import ExternalForce, force_scale_distribution
+from executive.risk.gaussian import normal_cdf
+from executive.risk.report import RiskReport
+from executive.scenario.types import RiskConfig, Uncertainty
+from executive.world.model import World
+
+if TYPE_CHECKING:
+    from executive.tasks.steps import AlternativePlan
+
+__all__ = [
+    "HAND_TOLERANCE",
+    "PushLimits",
+    "arm_force_capacity",
+    "assess_placement",
+    "hand_compliance",
+    "plan_forces",
+    "push_limits",
+]
+
+FloatArray = NDArray[np.float64]
+#: m: a hand further than this from its planned end fails its move (behaviours.move_hand.MoveHand's
+#: default tolerance): a push whose hand lags more stalls there.
+HAND_TOLERANCE = 0.03
+
+
+def _arm_dofs(world: World, side: str) -> tuple[NDArray[np.int_], FloatArray]:
+    """The dofs of ``side``'s arm and the waist that carry a hand force, and their torque limits (N m)."""
+    model = world.model
+    joints = set(world.ids.arm_joints[side])
+    for name in world.profile.waist_joints:
+        joints.add(int(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, name)))
+    dofs, limits = [], []
+    for a in range(model.nu):
+        joint = int(model.actuator_trnid[a, 0])
+        if model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT or joint not in joints:
+            continue
+        gear = abs(float(model.actuator_gear[a, 0])) or 1.0
+        limit = (
+            float(np.max(np.abs(model.actuator_forcerange[a]))) if model.actuator_forcelimited[a] else np.inf
+        )
+        dofs.append(int(model.jnt_dofadr[joint]))
+        limits.append(limit * gear)
+    return np.array(dofs, dtype=int), np.array(limits)
+
+
+def arm_force_capacity(world: World, side: str, qpos: FloatArray, direction: FloatArray) -> float:
+    """Largest force (N) ``side``'s hand can exert along the unit ``direction`` in ``qpos``, holding still.
+
+    Every arm and waist actuator must supply ``g_j + F (J^T u)_j`` within its force range;
+    inf for a robot whose actuators are not force-limited.
+    """
+    model = world.model
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    jac = np.zeros((3, model.nv))
+    mujoco.mj_jacSite(model, data, jac, None, world.ids.hand_sites[side])
+    dofs, limits = _arm_dofs(world, side)
+    lever = jac[:, dofs].T @ np.asarray(direction, dtype=float)
+    gravity = data.qfrc_bias[dofs]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        bound = np.where(lever > 0.0, (limits - gravity) / lever, (limits + gravity) / -lever)
+    bound = bound[np.abs(lever) > 1e-9]
+    return float(max(0.0, np.min(bound))) if bound.size else float("inf")
+
+
+def hand_compliance(world: World, side: str, qpos: FloatArray, direction: FloatArray) -> float:
+    """m/N: how far ``side``'s hand yields along the unit ``direction`` per newton it pushes there.
+
+    The robot stands on both feet (held fixed) and holds its pose with position servos of stiffness
+    ``kp`` (``actuator_gainprm``, times the gear squared): the quasi-static deflection ``dq`` under
+    the hand force ``f u`` minimises ``dq^T K dq / 2 - f u^T J_h dq`` subject to ``J_feet dq = 0``
+    (the KKT system over the robot's dofs; the floating base has no stiffness of its own, the
+    legs carry it). The compliance is ``u^T J_h dq / f``.
+    """
+    model = world.model
+    data = mujoco.MjData(model)
+    data.qpos[:] = qpos
+    mujoco.mj_forward(model, data)
+    objects = {
+        int(model.jnt_dofadr[model.body_jntadr[b]]) + k
+        for b in world.ids.object_bodies.values()
+        for k in range(6)
+    }
+    dofs = np.array([i for i in range(model.nv) if i not in objects], dtype=int)
+    stiffness = np.zeros(model.nv)
+    for a in range(model.nu):
+        if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT:
+            dof = int(model.jnt_dofadr[int(model.actuator_trnid[a, 0])])
+            stiffness[dof] += float(model.actuator_gainprm[a, 0]) * float(model.actuator_gear[a, 0]) ** 2
+    hand = np.zeros((3, model.nv))
+    mujoco.mj_jacSite(model, data, hand, None, world.ids.hand_sites[side])
+    feet = []
+    for foot in world.profile.feet.values():
+        jacp, jacr = np.zeros((3, model.nv)), np.zeros((3, model.nv))
+        mujoco.mj_jacBody(model, data, jacp, jacr, int(model.body(foot.body).id))
+        feet += [jacp, jacr]
+    constraint = np.vstack(feet)[:, dofs]
+    n, c = len(dofs), len(constraint)
+    kkt = np.zeros((n + c, n + c))
+    kkt[:n, :n] = np.diag(stiffness[dofs])
+    kkt[:n, n:], kkt[n:, :n] = constraint.T, constraint
+    rhs = np.concatenate([hand[:, dofs].T @ np.asarray(direction, dtype=float), np.zeros(c)])
+    dq = np.linalg.lstsq(kkt, rhs, rcond=None)[0][:n]
+    return float(np.asarray(direction, dtype=float) @ hand[:, dofs] @ dq)
+
+
+@dataclass(frozen=True)
+class PushLimits:
+    """What one push's hand can do (the worst over its pushing knots).
+
+    ``saturation``: N before an arm or waist actuator saturates (:func:`arm_force_capacity`);
+    ``compliance``: m/N the hand yields (:func:`hand_compliance`); ``leg``: m, the longest push
+    motion (the hand's target runs that far ahead before the move checks where the hand is).
+    """
+
+    saturation: float
+    compliance: float
+    leg: float
+
+    @property
+    def placed(self) -> float:
+        """N up to which the object ends within the place tolerance: it stops ``c F`` short."""
+        return min(self.saturation, DetectorThresholds().place_position_tol / self.compliance)
+
+    @property
+    def felt(self) -> float:
+        """N the robot can feel at most: the hand lags at most a leg plus the move's tolerance."""
+        return min(self.saturation, (HAND_TOLERANCE + self.leg) / self.compliance)
+
+
+def push_limits(world: World, plan: AlternativePlan) -> PushLimits | None:
+    """The :class:`PushLimits` of ``plan``'s push steps (None: it pushes nothing)."""
+    saturation, compliance, leg = np.inf, 0.0, 0.0
+    for step in plan.steps:
+        traj = plan.trajectories.get(step.name)
+        if traj is None or step.kind != "push" or step.force is None or not np.any(step.force):
+            continue
+        u = np.asarray(step.force, dtype=float) / float(np.linalg.norm(step.force))
+        path = np.asarray(traj.hand_paths[step.side], dtype=float)
+        leg = max(leg, float(np.linalg.norm(path[-1] - path[0])))
+        for q in (traj.qpos[0], traj.qpos[-1]):
+            saturation = min(saturation, arm_force_capacity(world, step.side, q, u))
+            compliance = max(compliance, hand_compliance(world, step.side, q, u))
+    return PushLimits(saturation, compliance, leg) if compliance > 0.0 else None
+
+
+def plan_forces(world: World, plan: AlternativePlan, uncertainty: Uncertainty) -> ExternalForce | None:
+    """The hand forces of ``plan``'s push steps per knot of its concatenated trajectory (None: none).
+
+    Knot order as :func:`executive.decision.assessment.concatenate` (each step after the first
+    drops its repeated start knot). ``limit``: the most the robot can feel (:attr:`PushLimits.felt`).
+    """
+    limits = push_limits(world, plan)
+    if limits is None:
+        return None
+    forces: list[FloatArray] = []
+    points: list[FloatArray] = []
+    for step in plan.steps:
+        traj = plan.trajectories.get(step.name)
+        if traj is None:
+            continue
+        skip = 1 if forces else 0
+        count = len(traj.times) - skip
+        pushing = step.kind == "push" and step.force is not None
+        force = np.asarray(step.force if pushing else (0.0, 0.0, 0.0), dtype=float)
+        forces.append(np.tile(force, (count, 1)))
+        points.append(np.asarray(traj.hand_paths[step.side], dtype=float)[skip:])
+    return ExternalForce(
+        np.concatenate(forces),
+        np.concatenate(points),
+        mass_sigma=uncertainty.object_mass,
+        friction_sigma=uncertainty.friction,
+        limit=limits.felt,
+    )
+
+
+def assess_placement(
+    world: World,
+    plan: AlternativePlan,
+    external: ExternalForce,
+    risk_config: RiskConfig,
+    uncertainty: Uncertainty,
+) -> RiskReport:
+    """The drop mode of a push: P(the object does not end within the place tolerance of its target).
+
+    Along the push the hand meets the object wherever it is, so its position error there is
+    absorbed; the object stops ``c F`` short (``c`` the hand's compliance) and stalls once
+    ``F`` exceeds the arm's saturation. Across the push its error ``e ~ N(0, s^2)`` (``s`` the
+    scene's ``object_position``) stays: per force scale node, P = 1 if stalled, else
+    ``P(|e| > tol - c F) = 2 Phi(-(tol - c F) / s)``; averaged over the nodes' weights.
+
+    Returns:
+        The report (mode ``grasp``, the drop mode's name in the combination); details: the
+        nominal force, the arm's limits, how short the object stops, the stall's share.
+    """
+    limits = push_limits(world, plan)
+    if limits is None:
+        raise ValueError(f"assess_placement: plan '{plan.name}' pushes nothing")
+    nodes, weights = force_scale_distribution(external.mass_sigma, external.friction_sigma)
+    needed = float(np.max(np.linalg.norm(external.force, axis=1)))
+    force = nodes * needed
+    room = DetectorThresholds().place_position_tol - limits.compliance * force
+    sigma = float(uncertainty.object_position)
+    if sigma > 0.0:
+        across = 2.0 * normal_cdf(-np.maximum(room, 0.0) / sigma)
+    else:
+        across = np.zeros_like(room)
+    stalled = (force > limits.saturation) | (room <= 0.0)
+    probability = float(np.sum(weights * np.where(stalled, 1.0, across)))
+    details: dict[str, float | str] = {
+        "grasp": "none: a push",
+        "push_force": needed,
+        "arm_saturation_force": limits.saturation,
+        "hand_stiffness": 1.0 / limits.compliance,
+        "placed_force_limit": limits.placed,
+        "felt_force_limit": limits.felt,
+        "short_by": limits.compliance * needed,
+        "stall_probability": float(np.sum(weights[stalled])),
+        "drop_reason": "the push falls short: the hand yields or stalls behind the object"
+        if np.any(stalled & (weights > 0.0))
+        else "the object's position error across the push",
+    }
+    severity = float(risk_config.severity.drop)
+    return RiskReport(
+        "grasp", probability, (probability, probability), severity, probability, details=details
+    )
