@@ -23,6 +23,7 @@ import yaml
 
 from executive.cli.main import main
 from executive.planning.planner import Planner
+from executive.runtime.mission import Executive
 from executive.runtime.runner import RunResult, execute_plan
 from executive.scenario import load
 from executive.scenario.bundled import scenario_path
@@ -102,6 +103,24 @@ def test_dotted_path_kind_plans_and_runs(plugin_dir: Path) -> None:
     result, reach, back = _plan_and_run(path)
     assert result.success, result.message
     assert reach < 0.01 and back < 0.03
+
+
+@pytest.mark.parametrize("found_by", ["entry point", "dotted path"])
+def test_plugin_kind_runs_through_the_executive(plugin_dir: Path, found_by: str) -> None:
+    # The executive's physics check runs dry runs and rollouts in spawned worker processes,
+    # which find the kind again: by its entry point, or beside its task's class (dotted path).
+    if found_by == "entry point":
+        _install_entry_point(plugin_dir)
+        task: dict[str, Any] = {"wave": {"at": AT, "height": HEIGHT}}
+    else:
+        task = {"kind": f"{MODULE}:WaveKind", "at": AT, "height": HEIGHT}
+    executive = Executive(_scenario_file(plugin_dir, task), approval="deny", truth="exact", background=False)
+    while not executive.done:
+        executive.tick()
+    summary = executive.summary()
+    assert summary["outcome"] == "success", summary
+    (row,) = summary["tasks"]
+    assert row["chosen"] in ("left", "right") and row["approval"] is None  # below the threshold
 
 
 def _validate(path: Path, capsys: pytest.CaptureFixture[str]) -> str:

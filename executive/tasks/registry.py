@@ -1,8 +1,9 @@
 """The registry of task kinds: the built-in ones, installed plug-ins, and dotted paths.
 
 A kind is found by its YAML key (``transfer``) among, in order: kinds registered in
-this process (:func:`register`), the built-in kinds, and entry points in the group
-``executive.task_kinds`` (``name = "package.module:Class"``). A scenario may also name
+this process (:func:`register`), the built-in kinds, entry points in the group
+``executive.task_kinds`` (``name = "package.module:Class"``), and last the TaskKind
+subclasses already imported (a worker process that unpickled a plug-in's task). A scenario may also name
 a class directly: ``kind: package.module:Class`` in a task block (see
 :func:`resolve`); it is then registered under its name, which its tasks' ``kind`` gives
 (a name another kind already has is refused). Kinds are imported only when first asked for.
@@ -11,6 +12,7 @@ a class directly: ``kind: package.module:Class`` in a task block (see
 from __future__ import annotations
 
 import importlib
+import inspect
 from importlib import metadata
 
 from executive.errors import ExecutiveError
@@ -108,7 +110,10 @@ def get(name: str) -> TaskKind:
         return register(resolve(BUILT_IN[name]))
     entry = _entry_points().get(name)
     if entry is None:
-        raise TaskKindError(unknown_name("task kind", name, available(), "kinds"))
+        loaded = _imported(name)
+        if loaded is None:
+            raise TaskKindError(unknown_name("task kind", name, available(), "kinds"))
+        return register(loaded)
     try:
         target = entry.load()
     except Exception as error:  # a plug-in's own import error, reported with its name
@@ -130,3 +135,27 @@ def _register_path(path: str) -> TaskKind:
     if taken is not None and taken != where:
         raise TaskKindError(f"task kind '{path}' is named '{kind.name}', the name of the kind {taken}")
     return known if known is not None else register(kind)
+
+
+def _imported(name: str) -> TaskKind | None:
+    """The kind called ``name`` among the TaskKind subclasses already imported (None: none is).
+
+    A process that unpickles a task (a physics worker) imports the task's module, and with it
+    a kind defined beside it that was registered in code or named by a dotted path elsewhere.
+
+    Raises:
+        TaskKindError: more than one class of that name is imported.
+    """
+    found: dict[str, type[TaskKind]] = {}
+    stack = list(TaskKind.__subclasses__())
+    while stack:
+        cls = stack.pop()
+        stack.extend(cls.__subclasses__())
+        if cls.name == name and not inspect.isabstract(cls):
+            found[f"{cls.__module__}:{cls.__qualname__}"] = cls
+    if len(found) > 1:
+        raise TaskKindError(f"task kind '{name}' is defined by {', '.join(sorted(found))}; register one")
+    if not found:
+        return None
+    ((where, cls),) = found.items()
+    return _instance(cls, where)
