@@ -1,28 +1,10 @@
 """Grasp risk: the seed's logistic in the pre-grasp error, tolerance probabilities, grasp matrix.
 
-Sources (one line each):
-- Seed (Long et al. 2018, eq. 2): P_x = 1 / (1 + exp(-a x / (x_max - d) + b)), x = d = the
-  pre-grasp error (distance in m, or angle in rad); the weighted sum of the two is the seed risk.
-  Constants: b = GraspRiskConfig.steepness, and a = b (x_max - s) / s so that P(s) = 1/2 at
-  the configured scale s. Guard: d >= x_max gives 1 (the limit of the formula as d -> x_max).
-  Note the seed's form is 1 / (1 + e^b) > 0 at zero error.
-- Tolerance failure: P(|e| > t), e ~ N(mu, s^2) = Phi(-(t + mu)/s) + Phi(-(t - mu)/s); the axes
-  (closing, lateral, yaw) fail independently: P = 1 - prod(1 - p_axis), with Boole bounds.
-- Grasp matrix (Prattichizzo & Trinkle, Springer Handbook of Robotics, 2nd ed., ch. 38 "Grasping"
-  (ch. 28 in the 1st ed.); Murray, Li & Sastry 1994, ch. 5): G_i = [[R_i, 0], [S(p_i - c) R_i, R_i]]
-  maps contact i's wrench in its frame (columns of R_i: normal into the object, two tangents)
-  to the object wrench about c; contact models keep the columns: frictionless point [f_n],
-  hard finger = point contact with friction [f_n, f_t, f_o], soft finger [f_n, f_t, f_o, m_n].
-- Quality: sigma_min(G) (Li & Sastry 1988) and isotropy sigma_min / sigma_max (Kim et al. 2004;
-  the inverse of the condition number the seed's Q relates to).
-- Jaws' approach (the box's face between two pads): a box of half-width b turned by t about its
-  centre (c along the jaws, l across them) has its face at y = c + b / cos t + tan t (x - l)
-  (plane geometry; Ericson, "Real-Time Collision Detection", 2005, 4.4: a convex polygon meets a
-  half-plane iff one of its vertices does), so a pad corner (x, y) outside it is hit iff
-  u = c - l tan t > y - x tan t - b / cos t; given t, u ~ N(0, s^2 (1 + tan^2 t)); t by
-  Gauss-Hermite quadrature.
-- Shake validation (the seed's sinusoidal excitation): oscillate the wrist
-  servos' targets q0 + A sin(2 pi f t) and watch the object in the hand frame.
+:func:`assess_grasp` scores closing a hand on an object: the probability that the object's
+pose error puts it outside the hand's tolerances (or in the way of the jaws' approach) and the
+seed's expected logistic risk (Long et al. 2018, eq. 2). :func:`grasp_quality` measures a grasp
+by its grasp matrix; :func:`shake_test` checks a grasp in physics. Each formula's source is on
+the function that computes it.
 """
 
 from __future__ import annotations
@@ -90,7 +72,9 @@ def logistic_risk(error: float, scale: float, x_max: float, steepness: float) ->
     """Seed eq. 2 for one error: 1 / (1 + exp(-a d / (x_max - d) + b)), guarded.
 
     d = |error|; b = steepness; a = b (x_max - scale) / scale (risk 1/2 at d = scale).
-    d >= x_max (including inf) gives 1. Needs 0 < scale < x_max and steepness > 0.
+    d >= x_max (including inf) gives 1 (the limit of the formula as d -> x_max). Needs
+    0 < scale < x_max and steepness > 0. Long et al. 2018, eq. 2; note that its form gives
+    1 / (1 + e^b) > 0 at zero error.
     """
     if not (0.0 < scale < x_max) or not steepness > 0.0 or not np.isfinite(x_max):
         raise ValueError(
@@ -281,7 +265,8 @@ def tolerance_probabilities(
     """Per-axis P(|error| > tolerance) (closing, lateral, yaw) with Gaussian object pose errors.
 
     The object position error is isotropic in the horizontal plane (sigma per axis), so in
-    the hand's horizontal axes it is again N(0, sigma^2) per axis, independent.
+    the hand's horizontal axes it is again N(0, sigma^2) per axis, independent. For
+    e ~ N(mu, s^2): P(|e| > t) = Phi(-(t + mu)/s) + Phi(-(t - mu)/s).
     """
     means = np.array([error.closing, error.lateral, error.yaw])
     tols = np.array([tolerance.closing, tolerance.lateral, tolerance.yaw])
@@ -338,6 +323,11 @@ class ApproachEnvelope:
 
     def clearances(self, yaw: ArrayLike) -> tuple[FloatArray, FloatArray]:
         """Largest u = c - l tan t that keeps off each face, for object yaw errors t (rad).
+
+        A box of half-width b turned by t about its centre (c along the jaws, l across them)
+        has its face at y = c + b / cos t + tan t (x - l), so a pad corner (x, y) outside it
+        is hit iff u > y - x tan t - b / cos t (plane geometry; Ericson, "Real-Time Collision
+        Detection", 2005, 4.4: a convex polygon meets a half-plane iff one of its vertices does).
 
         Returns (hi, lo): the approach misses the object iff lo < u < hi; hi is +inf (lo -inf)
         when no geom goes below the top on that side.
@@ -488,6 +478,33 @@ def assess_grasp(
     object's side anywhere on that path (:func:`approach_miss_probability`, offset and yaw
     together); its union with the lateral failure is taken as independent.
     """
+    err = _object_error(world, obj, hand_pose, object_pose, closing_axis_object)
+    tol = tolerance or grasp_tolerance(world, side, obj, closing_axis_object=closing_axis_object)
+    p_axes = tolerance_probabilities(err, tol, uncertainty.object_position, uncertainty.object_yaw_rad)
+    extra: dict[str, float] = {}
+    if approach is not None:
+        p_axes, extra = _with_approach(approach, p_axes, uncertainty)
+    lower, upper = union_bounds(p_axes)
+    cfg = risk_config.grasp
+    return RiskReport(
+        mode="grasp",
+        probability=float(np.clip(independent_union(p_axes), lower, upper)),
+        probability_bounds=(lower, upper),
+        severity=float(risk_config.severity.drop),
+        seed_score=expected_seed_risk(err, cfg, uncertainty.object_position, uncertainty.object_yaw_rad),
+        details=_grasp_details(side, obj, err, tol, p_axes, approach is not None, cfg) | extra,
+    )
+
+
+def _object_error(
+    world: World,
+    obj: str,
+    hand_pose: tuple[ArrayLike, ArrayLike],
+    object_pose: tuple[ArrayLike, ArrayLike] | None,
+    closing_axis_object: ArrayLike,
+) -> GraspError:
+    """:func:`grasp_error` of the hand at ``hand_pose`` on ``obj`` at ``object_pose`` (position,
+    quaternion w x y z; None: its pose in ``world.data``)."""
     if object_pose is None:
         position, quat = world.object_pose(obj)
     else:
@@ -497,7 +514,7 @@ def assess_grasp(
     mujoco.mju_quat2Mat(rotation, quat / np.linalg.norm(quat))
     rotation_m = rotation.reshape(3, 3)
     geom = world.ids.object_geoms[obj]
-    err = grasp_error(
+    return grasp_error(
         hand_pose[0],
         hand_pose[1],
         position,
@@ -505,42 +522,48 @@ def assess_grasp(
         closing_axis_object=closing_axis_object,
         axisymmetric=_is_axisymmetric(world.model, geom, rotation_m),
     )
-    tol = tolerance or grasp_tolerance(world, side, obj, closing_axis_object=closing_axis_object)
-    p_axes = tolerance_probabilities(err, tol, uncertainty.object_position, uncertainty.object_yaw_rad)
-    extra: dict[str, float] = {}
-    if approach is not None:
-        p_jaws, p_a, p_b = approach_miss_probability(
-            approach, uncertainty.object_position, uncertainty.object_yaw_rad
-        )
-        hi, lo = approach.clearances(0.0)
-        extra = {"p_approach": p_jaws, "p_approach_a": p_a, "p_approach_b": p_b}
-        extra |= {"approach_window_lo": float(lo[0]), "approach_window_hi": float(hi[0])}
-        p_axes = np.array([p_jaws, p_axes[1]])
-    lower, upper = union_bounds(p_axes)
-    cfg = risk_config.grasp
-    return RiskReport(
-        mode="grasp",
-        probability=float(np.clip(independent_union(p_axes), lower, upper)),
-        probability_bounds=(lower, upper),
-        severity=float(risk_config.severity.drop),
-        seed_score=expected_seed_risk(err, cfg, uncertainty.object_position, uncertainty.object_yaw_rad),
-        details={
-            "side": side,
-            "object": obj,
-            "closing_error": err.closing,
-            "lateral_error": err.lateral,
-            "yaw_error": err.yaw,
-            "translational_error": err.translational,
-            "seed_risk_nominal": seed_grasp_risk(err.translational, err.yaw, cfg),
-            "closing_tolerance": tol.closing,
-            "lateral_tolerance": tol.lateral,
-            "yaw_tolerance": tol.yaw,
-            "p_closing": float(p_axes[0]),
-            "p_lateral": float(p_axes[1]),
-            "p_yaw": float(p_axes[2]) if approach is None else 0.0,
-            **extra,
-        },
+
+
+def _with_approach(
+    approach: ApproachEnvelope, p_axes: FloatArray, uncertainty: Uncertainty
+) -> tuple[FloatArray, dict[str, float]]:
+    """The failure probabilities with the approach's miss probability in place of the closing
+    and yaw ones ([approach, lateral]), and the approach's details for the report."""
+    p_jaws, p_a, p_b = approach_miss_probability(
+        approach, uncertainty.object_position, uncertainty.object_yaw_rad
     )
+    hi, lo = approach.clearances(0.0)
+    extra = {"p_approach": p_jaws, "p_approach_a": p_a, "p_approach_b": p_b}
+    extra |= {"approach_window_lo": float(lo[0]), "approach_window_hi": float(hi[0])}
+    return np.array([p_jaws, p_axes[1]]), extra
+
+
+def _grasp_details(
+    side: str,
+    obj: str,
+    err: GraspError,
+    tol: GraspTolerance,
+    p_axes: FloatArray,
+    approached: bool,
+    cfg: GraspRiskConfig,
+) -> dict[str, float | str]:
+    """The grasp report's details: the errors, the tolerances and the per-axis probabilities
+    (``p_axes[0]`` is the approach's when ``approached``, and there is no yaw term)."""
+    return {
+        "side": side,
+        "object": obj,
+        "closing_error": err.closing,
+        "lateral_error": err.lateral,
+        "yaw_error": err.yaw,
+        "translational_error": err.translational,
+        "seed_risk_nominal": seed_grasp_risk(err.translational, err.yaw, cfg),
+        "closing_tolerance": tol.closing,
+        "lateral_tolerance": tol.lateral,
+        "yaw_tolerance": tol.yaw,
+        "p_closing": float(p_axes[0]),
+        "p_lateral": float(p_axes[1]),
+        "p_yaw": float(p_axes[2]) if not approached else 0.0,
+    }
 
 
 # --- grasp matrix ---------------------------------------------------------------------------
@@ -561,7 +584,10 @@ def grasp_matrix(
     """Grasp matrix G (6 x m): object wrench about the centre = G @ stacked contact wrenches.
 
     contact_frames[i] is R_i, columns (normal into the object, tangent, tangent) in the world;
-    G_i = [[R_i, 0], [S(p_i - c) R_i, R_i]] with the contact model's columns kept.
+    G_i = [[R_i, 0], [S(p_i - c) R_i, R_i]] with the contact model's columns kept: frictionless
+    point [f_n], hard finger = point contact with friction [f_n, f_t, f_o], soft finger
+    [f_n, f_t, f_o, m_n]. Prattichizzo & Trinkle, Springer Handbook of Robotics, 2nd ed., ch. 38
+    "Grasping" (ch. 28 in the 1st ed.); Murray, Li & Sastry 1994, ch. 5.
     """
     if model not in CONTACT_MODELS:
         raise ValueError(
@@ -605,7 +631,9 @@ def grasp_quality(
     object_centre: ArrayLike,
     model: ContactModel = "hard_finger",
 ) -> GraspQuality:
-    """Grasp matrix and its measures: sigma_min(G) and the isotropy sigma_min / sigma_max."""
+    """Grasp matrix and its measures: sigma_min(G) (Li & Sastry 1988) and the isotropy
+    sigma_min / sigma_max (Kim et al. 2004; the inverse of the condition number the seed's Q
+    relates to)."""
     points = np.asarray(contact_points, dtype=float).reshape(-1, 3)
     frames = np.asarray(contact_frames, dtype=float).reshape(-1, 3, 3)
     g = grasp_matrix(points, frames, object_centre, model)
@@ -685,7 +713,8 @@ def shake_test(
     tolerance: float = 0.02,
     joints: tuple[str, ...] | None = None,
 ) -> ShakeResult:
-    """Shake a grasped object by oscillating the wrist servos' targets; steps ``world.data``.
+    """Shake a grasped object by oscillating the wrist servos' targets (the seed's sinusoidal
+    excitation); steps ``world.data``.
 
     The caller has the object grasped in ``world.data``. Each joint's position actuator
     target becomes q0 + amplitude sin(2 pi f t) (clipped to its ctrlrange) for
