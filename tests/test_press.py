@@ -82,6 +82,7 @@ def test_reads_a_press() -> None:
     side = _scenario(point=[0.37, -0.20, 0.83], tolerance=0.4).mission[0]  # the face towards the robot
     assert isinstance(side, PressTask)
     assert side.normal == (-1.0, 0.0, 0.0) and side.tolerance == 0.4
+    assert side.alternatives == ("left", "right")  # both hands unless the block names them
     assert PressKind().moved_objects(task) == ()
 
 

@@ -131,7 +131,7 @@ class PressKind(TaskKind):
             force=force,
             duration=duration,
             tolerance=tolerance,
-            alternatives=self.read_alternatives(node),
+            alternatives=self.read_alternatives(node, SIDES),
         )
 
     def offered(self, task: Task, world: World) -> list[Alternative]:
