@@ -119,9 +119,8 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
     fall = assess_fall(world, whole, scenario.risk, scenario.uncertainty)
     collision = _collision(collision_model, plan)
     grasp_step = next((s for s in plan.steps if s.kind == "grasp"), None)
-    if grasp_step is None:  # a task that takes nothing in hand (a press)
-        drop = scenario.risk.severity.drop
-        grasp = RiskReport("grasp", 0.0, (0.0, 0.0), drop, 0.0, details={"grasp": "none"})
+    if grasp_step is None:  # the object is in hand from the start (a place) or never taken
+        grasp = _placed_from_hand(world, plan)
     else:
         approach = [s for s in plan.steps[: plan.steps.index(grasp_step)] if s.name in plan.trajectories][-1]
         down = [
@@ -129,8 +128,14 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
             for s in plan.steps[: plan.steps.index(grasp_step)]
             if s.name in plan.trajectories and s.side == grasp_step.side
         ]
+        places = any(s.kind == "place" for s in plan.steps)
         grasp = _grasp(
-            world, grasp_step.side, plan.task.object, plan.trajectories[approach.name], np.concatenate(down)
+            world,
+            grasp_step.side,
+            plan.task.object,
+            plan.trajectories[approach.name],
+            np.concatenate(down),
+            places=places,
         )
     hold = assess_hold(world, plan, scenario.risk, scenario.uncertainty)
     return combine([collision, fall, drop_union(grasp, hold)], scenario.risk)
@@ -157,7 +162,32 @@ def drop_union(grasp: RiskReport, hold: RiskReport) -> RiskReport:
     )
 
 
-def _grasp(world: World, side: str, obj: str, approach: Trajectory, path: np.ndarray) -> RiskReport:
+def _placed_from_hand(world: World, plan: AlternativePlan) -> RiskReport:
+    """The drop mode's share of a plan that takes no grasp: misplacing an object held from the start.
+
+    The hand puts the object down where the estimate's grip (the object's pose in the hand,
+    :attr:`World.grips`, the mean of ``looks`` observations of 1-sigma ``object_position`` per
+    horizontal axis) says it is; the grip's error lands on the target. Beyond the detector's
+    ``place_position_tol`` in the table plane it is misplaced: for an isotropic 2-D Gaussian
+    error, P(|e| > tol) = exp(-tol^2 / (2 sigma^2 / looks)) (the Rayleigh distribution's tail).
+    A plan that places nothing: 0.
+    """
+    severity = world.scenario.risk.severity.drop
+    if not any(s.kind == "place" for s in plan.steps):
+        return RiskReport("grasp", 0.0, (0.0, 0.0), severity, 0.0, details={"grasp": "none"})
+    grip = getattr(world, "grips", {}).get(plan.task.object)
+    looks = max(1, int(getattr(grip, "looks", 1)))
+    sigma = world.scenario.uncertainty.object_position / np.sqrt(looks)
+    tol = DetectorThresholds().place_position_tol
+    p = float(np.exp(-(tol**2) / (2 * sigma**2))) if sigma > 0 else 0.0
+    details: dict[str, float | str] = {"grasp": "none: held from the start", "grip_looks": float(looks)}
+    details["misplace_probability"] = p
+    return RiskReport("grasp", p, (p, p), severity, p, details=details)
+
+
+def _grasp(
+    world: World, side: str, obj: str, approach: Trajectory, path: np.ndarray, *, places: bool = True
+) -> RiskReport:
     """Grasp risk measured from the grasp point the plan intends, not the object's centre.
 
     A handover grasps the object off-centre on purpose; that planned offset is no error,
@@ -168,7 +198,8 @@ def _grasp(world: World, side: str, obj: str, approach: Trajectory, path: np.nda
     mode's failures include a placement beyond the failure detector's
     ``place_position_tol``; the same error ``e`` fails the grasp when ``|e|`` exceeds the
     lateral tolerance, so the union of the two is ``|e| > min(lateral, place_position_tol)``
-    (exact: nested events of one Gaussian, not a bound).
+    (exact: nested events of one Gaussian, not a bound). ``places`` False (a pick that keeps the
+    object): no placement, the lateral tolerance is the grasp's own.
 
     Across the jaws, the hand must clear the object's sides all the way down, not only at
     the grasp pose: ``path`` (the grasping hand's poses before the grasp, e.g. its pre-grasp
@@ -185,7 +216,10 @@ def _grasp(world: World, side: str, obj: str, approach: Trajectory, path: np.nda
     full = grasp_tolerance(world, side, obj)
     tolerance = GraspTolerance(
         max(0.0, full.closing - abs(planned.closing)),
-        min(max(0.0, full.lateral - abs(planned.lateral)), DetectorThresholds().place_position_tol),
+        min(
+            max(0.0, full.lateral - abs(planned.lateral)),
+            DetectorThresholds().place_position_tol if places else np.inf,
+        ),
         max(0.0, full.yaw - abs(planned.yaw)),
     )
     # The intended grasp point: where the hand is, at the object's height.

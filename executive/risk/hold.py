@@ -608,14 +608,21 @@ def hold_problem(world: World, plan: object, closing_s: float = 0.5) -> HoldProb
     Raises:
         HoldModelUnavailable: a grasping hand is not a parallel jaw (see :func:`grip`).
     """
+    from executive.tasks.steps import held_at_start
+
     obj: str = plan.task.object  # type: ignore[attr-defined]
     body = world.ids.object_bodies[obj]
     problem = HoldProblem(obj=obj, mass=float(world.model.body_mass[body]))
     holding: dict[str, tuple[CarrySpan, Grip]] = {}
     qpos, t_now = world.data.qpos.copy(), 0.0
     trajectories: dict[str, Trajectory] = plan.trajectories  # type: ignore[attr-defined]
+    held = held_at_start(plan.steps)  # type: ignore[attr-defined]
     for step in plan.steps:  # type: ignore[attr-defined]
         traj = trajectories.get(step.name)
+        if traj is not None and held.get(step.side) == obj and not problem.spans:
+            # Held from the start (a place after a pick): the grip is as the plan starts.
+            holding[step.side] = _start_span(world, traj.qpos[0], obj, step.side, t_now)
+            problem.spans.append(holding[step.side])
         if traj is not None:
             if holding:
                 rots, coms = _object_poses(world, traj.qpos, obj)
@@ -643,6 +650,17 @@ def hold_problem(world: World, plan: object, closing_s: float = 0.5) -> HoldProb
         elif step.kind == "release" and step.side in holding:
             del holding[step.side]
     return problem
+
+
+def _start_span(world: World, qpos: FloatArray, obj: str, side: str, t: float) -> tuple[CarrySpan, Grip]:
+    """The span of ``side`` holding ``obj`` in configuration ``qpos`` (its grip as it is there)."""
+    rot, com = object_pose_at(world, qpos, obj)
+    site_pos, site_rot = site_pose_at(world, qpos, side)
+    g = grip(world, side, obj, rot.T @ site_rot[:, 1])
+    half = _object_half(world, obj, rot, site_rot)
+    span = CarrySpan(side, site_rot.T @ rot, site_rot.T @ (com - site_pos), half)
+    span.add(t, rot, com, True)
+    return span, g
 
 
 # --- critical masses and the probability ---------------------------------------------------

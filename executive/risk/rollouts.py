@@ -121,6 +121,7 @@ def with_rollouts(scenario: Scenario, count: int | None) -> Scenario:
 
 
 def _truth(job: RolloutJob) -> World:
+    from executive.tasks.steps import held_at_start
     from executive.world.model import build, sample_perturbation
 
     if job.seed is None:
@@ -132,6 +133,10 @@ def _truth(job: RolloutJob) -> World:
         objects = [adr + k for adr in world.ids.object_qpos.values() for k in range(7)]
         robot = np.setdiff1d(np.arange(world.model.nq), objects)
         world.data.qpos[robot] = np.asarray(job.q_start, dtype=float)[robot]
+        # An object in a hand is where the hand holds it (the estimate's pose), not drawn anew.
+        for obj in held_at_start(job.plan.steps).values():
+            adr = world.ids.object_qpos[obj]
+            world.data.qpos[adr : adr + 7] = np.asarray(job.q_start, dtype=float)[adr : adr + 7]
         world.data.qvel[:] = 0.0
         mujoco.mj_forward(world.model, world.data)
     return world

@@ -14,14 +14,14 @@ from typing import cast, get_args
 import numpy as np
 import py_trees
 
-from behaviours.robot_access import install
+from behaviours.robot_access import NAMESPACE, install
 from executive.monitoring.detectors import Failure, FailureDetector, FailureMode
 from executive.planning.planner import Planner, PlanningError
 from executive.robot.simulated import SimulatedRobot
 from executive.scenario.types import Scenario
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
-from executive.tasks.steps import AlternativePlan, plan_alternative
+from executive.tasks.steps import AlternativePlan, held_at_start, plan_alternative
 from executive.world.model import World, build, sample_perturbation
 
 __all__ = ["RunResult", "behaviour_failure", "execute_plan", "run_alternative"]
@@ -71,6 +71,7 @@ def execute_plan(
     detector = FailureDetector(truth, distance_stride=0)
     robot = SimulatedRobot(truth, control_dt=control_dt, detector=detector)
     install(robot)
+    hold_from_start(robot, held_at_start(plan.steps))
     root = task_kind(task.kind).subtree(plan)
     tree = py_trees.trees.BehaviourTree(root)
     tree.setup()
@@ -107,6 +108,22 @@ def execute_plan(
         result.message = f"not finished after {limit:.1f} s of simulated time"
     tree.shutdown()
     return result
+
+
+def hold_from_start(robot: SimulatedRobot, held: dict[str, str]) -> None:
+    """A plan that starts with objects in hand (``held``, side -> object): grippers closed on them.
+
+    The blackboard's ``holding`` map says so to the behaviours and the detectors (as a grasp
+    earlier in the mission would have left it).
+    """
+    if not held:
+        return
+    for side in held:
+        robot.set_gripper(side, closed=True)
+    client = py_trees.blackboard.Client(name="executive.runner", namespace=NAMESPACE)
+    client.register_key("holding", access=py_trees.common.Access.WRITE)
+    client.holding = dict(held)
+    robot.detector.set_phase(carried=next(iter(held.items())))
 
 
 def _verify(result: RunResult, task: Task, truth: World, detector: FailureDetector) -> None:

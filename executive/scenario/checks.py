@@ -65,9 +65,17 @@ def check_scene(root: Node, scenario: Scenario, facts: RobotFacts | None) -> Non
     for i, item in enumerate(objects):
         _check_clear(root, f"{item.path}.position", item, [*obstacles, *objects[:i]], "the object")
         _check_resting(root, f"{item.path}.position", item, scene.table, [*obstacles, *objects], "the object")
+    # Each target is checked against the objects where the tasks before it left them: a task
+    # with a target leaves its object there, a pick takes it off the table into a hand.
+    now = list(objects)
     for t, task in enumerate(scenario.mission):
-        if getattr(task, "to", None) is not None and task.object:
-            _check_target(root, f"mission[{t}].{task.kind}", task, scenario, objects, obstacles)
+        if not task.object:
+            continue
+        if getattr(task, "to", None) is not None:
+            placed = _check_target(root, f"mission[{t}].{task.kind}", task, scenario, now, obstacles)
+            now = [*(o for o in now if o.name != task.object), placed]
+        elif task.kind == "pick":
+            now = [o for o in now if o.name != task.object]
 
 
 def _placed(
@@ -198,8 +206,9 @@ def _check_target(
     scenario: Scenario,
     objects: list[_Placed],
     obstacles: list[_Placed],
-) -> None:
-    body = next(item.body for item in objects if item.name == task.object)
+) -> _Placed:
+    """The object at ``task``'s target, checked clear of ``objects`` (as they are then) and obstacles."""
+    body = next(b for b in scenario.scene.objects if b.name == task.object)
     rpy = body.orientation_rad
     if task.to_yaw_rad is not None:
         rpy = (rpy[0], rpy[1], task.to_yaw_rad)
@@ -211,6 +220,7 @@ def _check_target(
     _check_clear(root, f"{path}.to", target, others, "the target of")
     if z is not None:
         _check_resting(root, f"{path}.to", target, scenario.scene.table, others, "the target of")
+    return target
 
 
 # --- reach

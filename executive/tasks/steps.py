@@ -28,6 +28,7 @@ __all__ = [
     "StepKind",
     "build_subtree",
     "check_grasps",
+    "held_at_start",
     "plan_alternative",
 ]
 
@@ -127,6 +128,22 @@ def plan_alternative(
         trajectories[step.name] = traj
         q = traj.qpos[-1]
     return AlternativePlan(alternative, task, tuple(steps), trajectories)
+
+
+def held_at_start(steps: tuple[Step, ...] | list[Step]) -> dict[str, str]:
+    """The objects the hands hold when an alternative starts: side -> object.
+
+    A hand holds an object from the start when it carries it in a motion before any grasp of
+    that hand (a ``place`` after a ``pick``); a push moves its object without holding it.
+    """
+    held: dict[str, str] = {}
+    grasped: set[str] = set()
+    for step in steps:
+        if step.kind == "grasp":
+            grasped.add(step.side)
+        elif step.carried is not None and step.kind != "push" and step.carried[0] not in grasped:
+            held.setdefault(step.carried[0], step.carried[1])
+    return held
 
 
 def check_grasps(world: World, steps: list[Step], table_clearance: float, grip_depth: float) -> None:
