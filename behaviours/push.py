@@ -32,11 +32,16 @@ class Push(MoveHand):
 
     def update(self) -> Status:
         status = super().update()
-        if status == Status.FAILURE and self._robot.failure is None and self.trajectory.carried is not None:
-            # The hand stopped behind an object it could not slide: the task failed (its object is
-            # not at the target: the drop mode, as a misplacement), not the robot.
-            obj = self.trajectory.carried[1]
+        if status != Status.FAILURE or self._robot.failure is not None or self.touching is None:
+            return status
+        # The task failed, not the robot (the drop mode: the object does not reach its target).
+        obj = self.touching[1]
+        if self.trajectory.carried is not None:  # the hand stopped behind an object it cannot slide
             self.feedback_message = f"drop: the push stalled behind {obj}: {self.feedback_message}"
+        else:  # coming down behind it, the hand landed on it: it is nearer than estimated
+            self.feedback_message = (
+                f"drop: the hand came down on {obj}, not behind it: {self.feedback_message}"
+            )
         return status
 
     def _set_detector_phase(self) -> None:

@@ -46,6 +46,7 @@ from executive.risk.grasp import (
     hand_pose_at,
 )
 from executive.risk.hold import assess_hold
+from executive.risk.push import assess_placement, plan_forces
 from executive.risk.report import RiskReport
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
@@ -116,9 +117,15 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
     scenario = world.scenario
     ordered = plan.ordered_trajectories()
     whole = concatenate(ordered, plan.name)
-    fall = assess_fall(world, whole, scenario.risk, scenario.uncertainty)
+    pushes = plan_forces(world, plan, scenario.uncertainty)  # the reaction of a push moves the ZMP
+    fall = assess_fall(world, whole, scenario.risk, scenario.uncertainty, pushes)
     collision = _collision(collision_model, plan)
     grasp_step = next((s for s in plan.steps if s.kind == "grasp"), None)
+    if pushes is not None and grasp_step is None:  # a push holds nothing: its drop mode is falling short
+        return combine(
+            [collision, fall, assess_placement(world, plan, pushes, scenario.risk, scenario.uncertainty)],
+            scenario.risk,
+        )
     if grasp_step is None:  # the object is in hand from the start (a place) or never taken
         grasp = _placed_from_hand(world, plan)
     else:

@@ -1,20 +1,24 @@
-"""Push risk: the force a push needs, the force the arm can exert, and what that does to balance.
+"""Push risk: the force a push needs, what the arm makes of it, and what the robot feels.
 
 A push step (:class:`executive.tasks.steps.Step` with ``force``) slides an object by Coulomb
 friction: the hand must exert ``F = mu m g`` (:func:`executive.tasks.push.push_force`). The
 truth's mass and friction factors (``uncertainty.object_mass``, ``uncertainty.friction``, each
-``max(0.2, 1 + s z)`` as the truth sampler draws them) scale it.
+``max(0.2, 1 + s z)`` as the truth sampler draws them) scale it
+(:func:`executive.risk.fall.force_scale_distribution`).
 
-* Stall: an arm holds a hand force ``F u`` only while every arm and waist actuator can supply
-  ``tau = g(q) + J^T F u`` (quasi-static; ``J`` the hand site's translational Jacobian, ``g``
-  the gravity torques, MuJoCo ``mj_jacSite`` and ``qfrc_bias`` at rest) within its
-  ``actuator_forcerange``. The largest such ``F`` over the push's knots is the arm's capacity;
-  a push that needs more stalls: the hand stops behind the object, the task fails (its drop
-  mode: the object does not reach its target), and the robot never feels more than that.
-  P(stall) = P(scale F > capacity) over the scale's distribution.
-* Balance: the reaction of the force the arm actually exerts, ``min(scale F, capacity)``, moves
-  the zero-moment point (:func:`executive.risk.fall.zero_moment_points`); the fall model takes it
-  per knot (:class:`executive.risk.fall.ExternalForce` with ``limit`` the capacity).
+* The arm: every arm and waist actuator must supply ``tau = g(q) + J^T F u`` (quasi-static;
+  ``J`` the hand site's translational Jacobian, MuJoCo ``mj_jacSite``; ``g`` the gravity
+  torques, ``qfrc_bias`` at rest) within its ``actuator_forcerange``: beyond
+  :func:`arm_force_capacity` it saturates. Before that, position servos yield: the whole body
+  on its two feet gives way ``c F`` at the hand (:func:`hand_compliance`, from the servos'
+  ``kp``), so the hand stops the object ``c F`` short of the target.
+* Placement (the push's drop mode, :func:`assess_placement`): short by more than the place
+  tolerance, or saturated, it fails; otherwise the object's position error across the push
+  stays in it (along the push the hand meets it wherever it is).
+* Balance: the robot feels at most what the hand can exert before its move gives up, a lag of a
+  push leg plus the move's tolerance (:attr:`PushLimits.felt`); its reaction moves the
+  zero-moment point (:func:`executive.risk.fall.zero_moment_points`), taken per knot by the fall
+  model (:class:`executive.risk.fall.ExternalForce`, from :func:`plan_forces`).
 """
 
 from __future__ import annotations
@@ -75,8 +79,16 @@ def _arm_dofs(world: World, side: str) -> tuple[NDArray[np.int_], FloatArray]:
 def arm_force_capacity(world: World, side: str, qpos: FloatArray, direction: FloatArray) -> float:
     """Largest force (N) ``side``'s hand can exert along the unit ``direction`` in ``qpos``, holding still.
 
-    Every arm and waist actuator must supply ``g_j + F (J^T u)_j`` within its force range;
-    inf for a robot whose actuators are not force-limited.
+    Every arm and waist actuator must supply ``g_j + F (J^T u)_j`` within its force range.
+
+    Args:
+        world: the world whose model ``qpos`` indexes.
+        side: the arm.
+        qpos: the configuration.
+        direction: unit vector (world) of the force the hand exerts.
+
+    Returns:
+        N; inf for a robot whose actuators are not force-limited.
     """
     model = world.model
     data = mujoco.MjData(model)
@@ -101,6 +113,15 @@ def hand_compliance(world: World, side: str, qpos: FloatArray, direction: FloatA
     the hand force ``f u`` minimises ``dq^T K dq / 2 - f u^T J_h dq`` subject to ``J_feet dq = 0``
     (the KKT system over the robot's dofs; the floating base has no stiffness of its own, the
     legs carry it). The compliance is ``u^T J_h dq / f``.
+
+    Args:
+        world: the world whose model ``qpos`` indexes.
+        side: the arm.
+        qpos: the configuration.
+        direction: unit vector (world) of the force the hand exerts.
+
+    Returns:
+        m/N along ``direction``.
     """
     model = world.model
     data = mujoco.MjData(model)
@@ -217,7 +238,9 @@ def assess_placement(
     absorbed; the object stops ``c F`` short (``c`` the hand's compliance) and stalls once
     ``F`` exceeds the arm's saturation. Across the push its error ``e ~ N(0, s^2)`` (``s`` the
     scene's ``object_position``) stays: per force scale node, P = 1 if stalled, else
-    ``P(|e| > tol - c F) = 2 Phi(-(tol - c F) / s)``; averaged over the nodes' weights.
+    ``P(|e| > tol - c F) = 2 Phi(-(tol - c F) / s)``; averaged over the nodes' weights. And the
+    hand comes down ``gap`` behind the estimated face (:func:`executive.tasks.push.descent_gap`): an
+    object nearer by more is landed on, ``Phi(-gap / s)``, independent of the rest.
 
     Returns:
         The report (mode ``grasp``, the drop mode's name in the combination); details: the
@@ -236,7 +259,11 @@ def assess_placement(
     else:
         across = np.zeros_like(room)
     stalled = (force > limits.saturation) | (room <= 0.0)
-    probability = float(np.sum(weights * np.where(stalled, 1.0, across)))
+    # Nearer than estimated by more than the descent's gap, the object is landed on.
+    from executive.tasks.push import descent_gap
+
+    landed = float(normal_cdf(-descent_gap(world) / sigma)) if sigma > 0.0 else 0.0
+    probability = 1.0 - (1.0 - landed) * (1.0 - float(np.sum(weights * np.where(stalled, 1.0, across))))
     details: dict[str, float | str] = {
         "grasp": "none: a push",
         "push_force": needed,
@@ -246,6 +273,7 @@ def assess_placement(
         "felt_force_limit": limits.felt,
         "short_by": limits.compliance * needed,
         "stall_probability": float(np.sum(weights[stalled])),
+        "landing_probability": landed,
         "drop_reason": "the push falls short: the hand yields or stalls behind the object"
         if np.any(stalled & (weights > 0.0))
         else "the object's position error across the push",

@@ -34,13 +34,25 @@ from executive.tasks.hands import UP, HandFrames
 from executive.tasks.steps import CompositionConfig, Step
 from executive.world.model import World
 
-__all__ = ["CONTACT_GAP", "TIP_CLEARANCE", "PushKind", "PushTask", "push_force", "push_steps"]
+__all__ = [
+    "CONTACT_GAP",
+    "GAP_SIGMAS",
+    "TIP_CLEARANCE",
+    "PushKind",
+    "PushTask",
+    "descent_gap",
+    "push_force",
+    "push_steps",
+]
 
 FloatArray = NDArray[np.float64]
 SIDES = ("left", "right")
-#: m the hand stops behind the object's face before it pushes (the planner's 2 cm clearance is
-#: waived for the pushed object, so the gap is what keeps the descent off it).
+#: m the hand stops behind the object's face before it pushes at least (the planner's 2 cm
+#: clearance is waived for the pushed object, so the gap is what keeps the descent off it).
 CONTACT_GAP = 0.01
+#: The gap is at least this many sigmas of the object's position error (``uncertainty.object_position``):
+#: an object nearer than its estimate by more than the gap is landed on (:func:`descent_gap`).
+GAP_SIGMAS = 3.0
 #: m between the fingertips and the table top while pushing: the planner's 1 cm table distance
 #: plus 5 mm for the arm servos' tracking error under the push.
 TIP_CLEARANCE = 0.015
@@ -183,6 +195,11 @@ def _hand_face(
     return reach, top
 
 
+def descent_gap(world: World) -> float:
+    """m between the hand's face and the object's estimated face as the hand comes down behind it."""
+    return max(CONTACT_GAP, GAP_SIGMAS * world.scenario.uncertainty.object_position)
+
+
 def _unpushable(step: str, side: str, reason: str) -> PlanningError:
     return PlanningError(step, side, 0.0, 0.0, 0, reason=reason)
 
@@ -226,7 +243,7 @@ def push_steps(world: World, task: PushTask, side: str, cfg: CompositionConfig) 
     _check_slides(world, task.object, side, half, (TIP_CLEARANCE, min(height, site_height + top)))
     behind = half + reach
     z = table + site_height
-    start = np.array([pos[0], pos[1], z]) - (behind + CONTACT_GAP) * u
+    start = np.array([pos[0], pos[1], z]) - (behind + descent_gap(world)) * u
     end = np.array([task.to[0], task.to[1], z]) - behind * u
     force = push_force(world, task.object) * u
     obj = task.object

@@ -186,6 +186,7 @@ def build_subtree(plan: AlternativePlan, *, guard: bool = False) -> py_trees.com
     from behaviours.guard import RiskGuard
     from behaviours.handover import handover_subtree
     from behaviours.move_hand import Carry, Home, Lift, MoveHand, Place, Retreat
+    from behaviours.push import Push
 
     movers = {
         "move": MoveHand,
@@ -194,6 +195,7 @@ def build_subtree(plan: AlternativePlan, *, guard: bool = False) -> py_trees.com
         "place": Place,
         "retreat": Retreat,
         "home": Home,
+        "push": Push,
     }
     children: list[py_trees.behaviour.Behaviour] = []
     steps = list(plan.steps)
@@ -221,7 +223,7 @@ def build_subtree(plan: AlternativePlan, *, guard: bool = False) -> py_trees.com
         else:
             # After a release the open jaws may still brush the object they let go of.
             let_go = step.obj or (step.allow_contact[0] if step.allow_contact else "")
-            touching = (step.side, let_go) if step.kind in ("retreat", "home") and let_go else None
+            touching = (step.side, let_go) if step.kind in ("retreat", "home", "push") and let_go else None
             # The move onto a grasp: the open jaws must straddle the object, not land on it.
             after = steps[i + 1] if i + 1 < len(steps) else None
             onto_grasp = after is not None and after.kind == "grasp" and after.side == step.side

@@ -1,0 +1,188 @@
+"""The ``push`` task kind: its YAML, a light push in physics, and a heavy push's risk against physics.
+
+The scenes are book_transfer's table with one book (no stack), pushed 10 cm away from the robot
+with the left hand. Light: 0.6 kg, friction 1 (a 5.9 N push). Heavy: 20 kg (196 N), more than the
+arm can push: the push falls short (the drop mode) and the robot feels at most what the arm exerts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import re
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pytest
+
+from executive.decision.assessment import AlternativeRisk, assess_task
+from executive.errors import ScenarioError
+from executive.monitoring.detectors import FailureDetector
+from executive.planning.planner import Planner, PlanningError
+from executive.risk.gaussian import normal_cdf
+from executive.risk.rollouts import RolloutJob, estimate_scenario, rollout_seed, run_job
+from executive.runtime.runner import execute_plan
+from executive.scenario.loader import load
+from executive.scenario.types import Body, Scenario
+from executive.tasks.push import PushTask
+from executive.tasks.steps import plan_alternative
+from executive.validation.stats import clopper_pearson
+from executive.world.model import build
+
+BUNDLED = Path(__file__).resolve().parents[1] / "scenarios" / "book_transfer.yaml"
+MISSION = """mission:
+  - push:
+      object: book
+      to: [0.60, 0.30]
+      alternatives: [left]
+"""
+
+
+def scenario_text(mass: float = 0.6, mission: str = MISSION) -> str:
+    """book_transfer without the stack, the book at (0.50, 0.30) with ``mass``, and ``mission``."""
+    text = BUNDLED.read_text()
+    text = text[: text.index("  obstacles:")] + text[text.index("uncertainty:") : text.index("mission:")]
+    text = text.replace("position: [0.52, 0.26]", "position: [0.50, 0.30]")
+    return re.sub(r"mass: 0\.6 ", f"mass: {mass} ", text) + mission
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "push.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_the_kind_reads_its_block(tmp_path: Path) -> None:
+    scenario = load(write(tmp_path, scenario_text()))
+    task = scenario.mission[0]
+    assert isinstance(task, PushTask)
+    assert (task.object, task.to, task.alternatives) == ("book", (0.60, 0.30, None), ("left",))
+    assert task.label() == "push book to (0.60, 0.30)"
+
+
+@pytest.mark.parametrize(
+    ("block", "path", "words"),
+    [
+        ("      object: book\n", "mission[0].push.to", "missing required key 'to'"),
+        ("      object: books\n      to: [0.6, 0.3]\n", "mission[0].push.object", "unknown object 'books'"),
+        ("      object: book\n      to: [0.6]\n", "mission[0].push.to", "a list of 2 numbers"),
+        ("      object: book\n      to: [0.6, 0.3, 0.9]\n", "mission[0].push.to", "a list of 2 numbers"),
+        ("      object: book\n      to: [1.5, 0.3]\n", "mission[0].push.to", "not over the table"),
+        ("      object: book\n      to: [0.6, 0.3]\n      to_yaw: 90\n", "mission[0].push.to_yaw", "key"),
+        (
+            "      object: book\n      to: [0.6, 0.3]\n      alternatives: [left_to_right]\n",
+            "mission[0].push.alternatives[0]",
+            "left_to_right",
+        ),
+    ],
+)
+def test_a_bad_block_names_its_key_path(tmp_path: Path, block: str, path: str, words: str) -> None:
+    with pytest.raises(ScenarioError) as info:
+        load(write(tmp_path, scenario_text(mission=f"mission:\n  - push:\n{block}")))
+    assert path in str(info.value) and words in str(info.value)
+
+
+def assessed(tmp_path: Path, mass: float) -> tuple[Scenario, AlternativeRisk]:
+    scenario = load(write(tmp_path, scenario_text(mass)))
+    (left,) = assess_task(build(scenario), scenario.mission[0])
+    assert left.feasible, left.error
+    return scenario, left
+
+
+def test_a_light_push_slides_the_book_to_its_target(tmp_path: Path) -> None:
+    scenario, left = assessed(tmp_path, 0.6)
+    assert left.risk is not None and left.plan is not None
+    fall, drop = left.risk.components["fall"], left.risk.components["grasp"]
+    assert fall.details["max_external_force"] == pytest.approx(1.0 * 0.6 * 9.81, rel=1e-6)  # mu m g
+    # The ZMP moves back by F h / (m g), h the hand's height over the floor (Kajita et al.): 4 mm.
+    world = build(scenario)
+    heights = [left.plan.trajectories[s.name].hand_paths["left"][:, 2] for s in left.plan.steps if s.force]
+    weight = float(world.model.body_subtreemass[world.ids.base_body]) * 9.81
+    assert fall.details["max_zmp_shift"] == pytest.approx(5.886 * np.max(np.concatenate(heights)) / weight)
+    assert fall.probability < 1e-6 and drop.details["stall_probability"] == 0.0
+    push = next(s for s in left.plan.steps if s.name == "left.push")
+    assert push.kind == "push" and push.carried == ("left", "book")
+    assert push.allow_contact == ("book", "table_top")
+    truth = build(scenario)
+    result = execute_plan(left.plan, truth, scenario.mission[0])
+    assert result.outcome == "success", result.message
+    assert result.placement_error_m is not None and result.placement_error_m < 0.02
+
+
+def rollouts(scenario: Scenario, left: AlternativeRisk, count: int) -> list[str]:
+    """Outcomes of ``count`` rollouts of ``left`` on truths drawn from the scenario's uncertainty."""
+    assert left.plan is not None
+    estimate = estimate_scenario(build(scenario))
+    jobs = [RolloutJob(estimate, left.plan, rollout_seed(0, j)) for j in range(count)]
+    return [run_job(job)["outcome"] for job in jobs]
+
+
+def test_a_heavy_push_falls_short_and_the_robot_stands(tmp_path: Path) -> None:
+    """20 kg needs 196 N; the arm saturates at 191 N and yields 0.34 mm/N, so the book would stop
+    6.7 cm short: the push fails (drop mode, P = 1), the robot stays up (P(fall) a few %, from the
+    most the arm can exert, 170 N, against the 196 N that would take the ZMP to the heels)."""
+    scenario, left = assessed(tmp_path, 20.0)
+    assert left.risk is not None
+    fall, drop = left.risk.components["fall"], left.risk.components["grasp"]
+    needed = float(fall.details["max_external_force"])
+    assert needed == pytest.approx(20.0 * 9.81, rel=1e-6)
+    limit, tip = float(fall.details["arm_force_limit"]), float(fall.details["force_to_tip"])
+    assert limit < tip < float(needed)
+    assert drop.probability > 0.99 and float(drop.details["short_by"]) > 0.02
+    assert fall.probability < 0.1
+    outcomes = rollouts(scenario, left, 6)
+    falls, short = outcomes.count("fall"), outcomes.count("drop")
+    assert short == len(outcomes), outcomes
+    low, high = clopper_pearson(falls, len(outcomes))
+    assert low <= fall.probability <= high
+    low, high = clopper_pearson(short, len(outcomes))
+    assert low <= drop.probability <= high
+
+
+def test_the_light_push_predicts_and_shows_no_fall(tmp_path: Path) -> None:
+    """P(fall) ~ 0 and no rollout falls. (Its drop mode, the book's 1 cm position error across the
+    push, predicts 7 %; physics misplaces more often: docs/measurements.md, "Push".)"""
+    scenario, left = assessed(tmp_path, 0.6)
+    assert left.risk is not None
+    outcomes = rollouts(scenario, left, 3)
+    assert outcomes.count("fall") == 0 and outcomes.count("collision") == 0, outcomes
+    assert left.risk.components["fall"].probability < 1e-6
+    drop = left.risk.components["grasp"]
+    room = 0.02 - 5.886 / float(drop.details["hand_stiffness"])  # the place tolerance less the shortfall
+    landed = normal_cdf(-3.0)  # nearer than its estimate by more than the 3-sigma descent gap
+    across = 2.0 * normal_cdf(-room / 0.01)  # off the push line by more than the room left
+    assert drop.probability == pytest.approx(1.0 - (1.0 - landed) * (1.0 - across), rel=0.01)
+
+
+def test_an_object_pushed_too_high_would_tip(tmp_path: Path) -> None:
+    """A 20 cm tall, 4 cm deep box with friction 1 tips (mu z_c > half depth) instead of sliding."""
+    scenario = load(write(tmp_path, scenario_text()))
+    body = dataclasses.replace(scenario.scene.objects[0], size=(0.04, 0.11, 0.20), position=(0.5, 0.3, 0.9))
+    tall = dataclasses.replace(scenario, scene=dataclasses.replace(scenario.scene, objects=(body,)))
+    world = build(tall)
+    with pytest.raises(PlanningError, match="would tip over, not slide"):
+        plan_alternative(Planner(world), world, tall.mission[0], "left")
+
+
+@pytest.mark.parametrize("pushing", [True, False])
+def test_a_pushed_object_running_into_another_is_a_collision(tmp_path: Path, pushing: bool) -> None:
+    """The book slid (1.5 m/s, friction 1: 11 cm) into a box 9 cm ahead: a collision while pushed;
+    two resting objects touching (a stack) are allowed. Far from the hand, the book is no drop."""
+    scenario = load(write(tmp_path, scenario_text()))
+    box = Body("box", "box", (0.10, 0.10, 0.05), (0.75, 0.30, 0.825), (0.0, 0.0, 0.0), mass=0.5)
+    scene = dataclasses.replace(scenario.scene, objects=(*scenario.scene.objects, box))
+    world = build(dataclasses.replace(scenario, scene=scene))
+    detector = FailureDetector(world)
+    if pushing:
+        detector.set_phase(pushing=("left", "book"))
+    free = world.model.jnt_dofadr[world.model.body_jntadr[world.ids.object_bodies["book"]]]
+    world.data.qvel[free] = 1.5
+    found = None
+    while world.data.time < 0.5 and found is None:
+        mujoco.mj_step(world.model, world.data)
+        found = detector.check()
+    if pushing:
+        assert found is not None and found.mode == "collision" and set(found.bodies) == {"book", "box"}
+    else:
+        assert found is None
+    assert detector.phase["pushing"] == (("left", "book") if pushing else None)
