@@ -464,6 +464,7 @@ def test_a_carried_object_may_touch_the_table_only_while_being_placed(world: Wor
         "grasping": None,
         "placing": "book",
         "approaching": None,
+        "pushing": None,
     }
 
 
