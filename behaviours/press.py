@@ -36,6 +36,8 @@ class Press(RobotBehaviour):
         name: the behaviour's name (the step's).
         trajectory: the press step's plan, from the standoff to the servo depth of the force.
         side, target: the hand and the obstacle it presses.
+        standoff: how far (m) the trajectory starts off the surface: it is played until the hand is
+            planned to touch (the rest, the depth of the force, is the force loop's), or touches.
         force: the commanded force (N) along the trajectory's push.
         hold_s: how long the force must stay within ``tolerance``.
         tolerance: N either side of ``force``.
@@ -55,20 +57,22 @@ class Press(RobotBehaviour):
         *,
         side: str,
         target: str,
+        standoff: float,
         force: float,
         hold_s: float,
         tolerance: float,
         settle_s: float = 2.0,
         gain_p: float = 0.0,
         gain_i: float = 0.25,
-        seek_speed: float = 0.01,
+        seek_speed: float = 0.005,
         steady_s: float = 0.3,
         ramp_s: float = 0.1,
     ) -> None:
         super().__init__(name)
         self.bb.register_key(RECORD_KEY, access=py_trees.common.Access.WRITE)
         self.trajectory = trajectory
-        self.side, self.target = side, target
+        self.side, self.target, self.standoff = side, target, standoff
+        self._touch_s = trajectory.duration
         self.force, self.hold_s, self.tolerance = force, hold_s, tolerance
         self.settle_s, self.ramp_s, self.steady_s = settle_s, ramp_s, steady_s
         self.gain_p, self.gain_i, self.seek_speed = gain_p, gain_i, seek_speed
@@ -82,6 +86,7 @@ class Press(RobotBehaviour):
         self._u = 0.0  # N of push added to the planned target's by the force loop
         self._shift = np.zeros(0)  # servo target shift per newton (qpos layout)
         self._q_end = trajectory.qpos[-1]
+        self._q_base = self._q_end  # the target the force loop shifts: where the hand first touched
         self.samples: list[tuple[float, float]] = []  # (time, force) of the hold
         self.trace: list[tuple[float, float, str]] = []  # (time, force, phase) of every tick
         self.last_force = 0.0
@@ -89,6 +94,7 @@ class Press(RobotBehaviour):
     def initialise(self) -> None:
         robot = self._robot = self.robot
         self._phase, self._since, self._u, self.samples, self.trace = "in", robot.time, 0.0, [], []
+        self._q_base = self._q_end
         self._integral, self._touched = 0.0, False
         self.last_force = 0.0
         robot.detector.set_phase(grasping=(self.side, self.target))  # the planned contact
@@ -99,6 +105,13 @@ class Press(RobotBehaviour):
         hand_path = self.trajectory.hand_paths[self.side]
         push = hand_path[-1] - hand_path[0]
         self._into = push / max(float(np.linalg.norm(push)), 1e-9)
+        # The plan's time of touch: its hand path ``standoff`` along the push (np.interp: a monotone path).
+        along = np.maximum.accumulate((hand_path - hand_path[0]) @ self._into)
+        times = self.trajectory.times
+        self._touch_s = float(np.interp(self.standoff, along, times))
+        self._speed = np.diff(along) / np.maximum(np.diff(times), 1e-9)
+        self._speed_t = times[:-1]
+        self._tau = 0.0  # how far into the trajectory the target is
         self.feedback_message = f"{self.name}: in to the {self.target}"
 
     def contact_force(self) -> float:
@@ -130,7 +143,7 @@ class Press(RobotBehaviour):
         if self._phase == "out":
             return self._fade_out(t)
         self._control(f)
-        robot.set_joint_targets(self._q_end + self._u * self._shift)
+        robot.set_joint_targets(self._q_base + self._u * self._shift)
         if self._phase == "settle":
             return self._settle(t, f)
         return self._hold(t, f)
@@ -148,13 +161,20 @@ class Press(RobotBehaviour):
         self._u = self._integral + self.gain_p * error
 
     def _move_in(self, t: float) -> Status:
+        """Play the plan in, no faster than ``seek_speed`` along the push, to its planned touch; at the
+        first touch (or there) the force loop takes over from where the target is."""
         robot, traj = self._robot, self.trajectory
         dt = robot.control_dt
-        q = traj.sample(t)
-        robot.set_joint_targets(q, (traj.sample(t + dt) - q) / dt)
-        if t < traj.duration:
+        tau = self._tau
+        q = traj.sample(tau)
+        if tau < self._touch_s and self.last_force <= 0.0:
+            speed = float(np.interp(tau, self._speed_t, self._speed))  # the plan's, along the push
+            step = dt * min(1.0, self.seek_speed / speed) if speed > 0 else dt
+            self._tau = min(tau + step, self._touch_s)
+            robot.set_joint_targets(q, (traj.sample(self._tau) - q) / dt)
             return Status.RUNNING
-        robot.set_joint_targets(self._q_end)
+        self._q_base = q
+        robot.set_joint_targets(self._q_base)
         data, model = robot.data, robot.world.model
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
@@ -244,7 +264,8 @@ class Press(RobotBehaviour):
 
     def _fade_out(self, t: float) -> Status:
         fade = max(0.0, 1.0 - t / self.ramp_s) if self.ramp_s > 0 else 0.0
-        self._robot.set_joint_targets(self._q_end + fade * self._u * self._shift)
+        held = self._q_base + self._u * self._shift
+        self._robot.set_joint_targets(self._q_end + fade * (held - self._q_end))  # to the release's start
         if fade > 0.0:
             return Status.RUNNING
         mean, held = self.record()["mean_n"], self.record()["held_s"]

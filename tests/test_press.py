@@ -174,8 +174,13 @@ def test_steps_lay_the_press_out(estimate: World) -> None:
 
 def _run(
     planner: Planner, task: PressTask, monkeypatch: pytest.MonkeyPatch, truth: World | None = None
-) -> tuple[Any, list[tuple[float, float]]]:
-    """Plan and execute the right-hand press; also the feet's total normal force (N) per press tick."""
+) -> tuple[Any, list[tuple[float, float]], list[tuple[float, float, str]]]:
+    """Plan and execute the right-hand press.
+
+    Returns:
+        The run's result, the feet's total normal force (time, N) per press tick, and the press
+        behaviour's trace (time, contact force, phase).
+    """
     world = planner.world
     plan = plan_alternative(planner, world, task, "right")
     truth = truth or build(world.scenario)
@@ -185,6 +190,7 @@ def _run(
 
     def watched(self: press_behaviour.Press) -> Any:
         status = update(self)
+        pressing.append(self)
         d, wrench, total = truth.data, np.zeros(6), 0.0
         for i in range(d.ncon):
             if int(d.contact.geom[i, 0]) in feet or int(d.contact.geom[i, 1]) in feet:
@@ -193,14 +199,16 @@ def _run(
         floor.append((float(d.time), total))
         return status
 
+    pressing: list[press_behaviour.Press] = []
     monkeypatch.setattr(press_behaviour.Press, "update", watched)
-    return execute_plan(plan, truth, task), floor
+    result = execute_plan(plan, truth, task)
+    return result, floor, (pressing[-1].trace if pressing else [])
 
 
 def test_presses_15_newtons_for_a_second(planner: Planner, monkeypatch: pytest.MonkeyPatch) -> None:
     task = planner.world.scenario.mission[0]
     assert isinstance(task, PressTask)
-    result, floor = _run(planner, task, monkeypatch)
+    result, floor, trace = _run(planner, task, monkeypatch)
     assert result.outcome == "success", result.message
     verdict = PressKind().verify(task, planner.world, None)
     assert verdict is not None and verdict.ok and verdict.event == "pressed"
@@ -213,13 +221,16 @@ def test_presses_15_newtons_for_a_second(planner: Planner, monkeypatch: pytest.M
     hold = [f for t, f in floor if r["start_s"] <= t <= r["start_s"] + r["held_s"]]
     relief = weight - float(np.mean(hold))
     assert relief == pytest.approx(r["mean_n"], abs=1.5), (weight, relief)
+    # The hand comes in slowly (seek_speed): the first touch does not overshoot the command much.
+    peak = max(f for _, f, phase in trace if phase != "out")
+    assert peak <= task.force + 2 * task.tolerance, peak
 
 
 def test_more_force_than_the_arm_gives_is_reported(planner: Planner, monkeypatch: pytest.MonkeyPatch) -> None:
     task = planner.world.scenario.mission[0]
     assert isinstance(task, PressTask)
     strong = dataclasses.replace(task, force=300.0, tolerance=30.0)  # beyond the YAML's 100 N, on purpose
-    result, _ = _run(planner, strong, monkeypatch)
+    result, _, _ = _run(planner, strong, monkeypatch)
     assert result.outcome == "failed"
     assert "press: force 300 N needs" in result.message and "beyond its servo's" in result.message
 
@@ -230,7 +241,7 @@ def test_a_panel_that_is_not_there_is_no_contact(planner: Planner, monkeypatch: 
     moved = build(
         planner.world.scenario, Perturbation(obstacle_offsets={"panel": (0.0, -0.30)}), kind="truth"
     )
-    result, _ = _run(planner, task, monkeypatch, truth=moved)
+    result, _, _ = _run(planner, task, monkeypatch, truth=moved)
     assert result.outcome == "failed"
     assert "press: no contact between the right hand and panel" in result.message
 
@@ -276,7 +287,8 @@ def test_the_press_reaction_moves_the_zmp(planner: Planner) -> None:
     task = world.scenario.mission[0]
     plan = plan_alternative(planner, world, task, "right")
     whole = concatenate(plan.ordered_trajectories(), plan.name)
-    forces, points = [], []
+    forces: list[np.ndarray] = []
+    points: list[np.ndarray] = []
     for step in plan.steps:  # Step.force on the press step's knots, as concatenate orders them
         traj = plan.trajectories[step.name]
         skip = 1 if forces else 0

@@ -172,6 +172,7 @@ class PressKind(TaskKind):
                         plan.trajectories[step.name],
                         side=step.side,
                         target=task.target,
+                        standoff=self.standoff,
                         force=task.force,
                         hold_s=step.hold_s,
                         tolerance=task.tolerance,

@@ -86,7 +86,8 @@ class AlternativePlan:
 
     @property
     def duration(self) -> float:
-        return sum(t.duration for t in self.trajectories.values())
+        """Seconds as planned: the motions' and the holds of steps that keep a force (a press)."""
+        return sum(t.duration for t in self.trajectories.values()) + sum(s.hold_s for s in self.steps)
 
     def ordered_trajectories(self) -> list[Trajectory]:
         return [self.trajectories[s.name] for s in self.steps if s.name in self.trajectories]
