@@ -1,14 +1,19 @@
 """Pressing: push a hand into an obstacle with a commanded force for a while, measuring the contact force.
 
-``Press(name, trajectory, side=, target=, force=, hold_s=, tolerance=)`` plays the press step's
-planned trajectory (standoff to the servo depth of the force), then holds the hand there and closes
-the loop on the contact force between the hand's geoms and the target's (``mujoco.mj_contactForce``,
-normal components summed), shifting the arm's servo targets by ``J^T dF / kp``
-(:func:`executive.tasks.press_geometry.servo_shift`) until the force is within ``tolerance`` of the
-command, then for ``hold_s``. It succeeds when every sample of the hold was within the tolerance
-and leaves its measurement on the blackboard (``/executive/press_record``); it fails with
-``press: ...`` naming what went wrong: no contact, the force too low (with the arm joint at its
-torque limit, if one is) or too high, or leaving the tolerance during the hold.
+``Press(name, trajectory, side=, target=, standoff=, force=, hold_s=, tolerance=)`` plays the press
+step's planned trajectory (from ``standoff`` off the surface to the servo depth of the force) no
+faster than ``seek_speed`` along the push, up to where the plan touches the surface or the hand
+does. From there it closes the loop on the contact force between the hand's geoms and the target's
+(``mujoco.mj_contactForce``, normal components summed): the arm's servo targets move by
+``J^T u / kp`` (:func:`executive.tasks.press_geometry.servo_shift`) for a push ``u`` that creeps on
+at ``seek_speed`` until the first touch and then integrates the force error, until the force has
+stayed within half the tolerance for ``steady_s``; then it must stay within ``tolerance`` for
+``hold_s``. At the end the target fades back to the plan's last knot (where the release starts).
+It succeeds when every sample of the hold was within the tolerance and leaves its measurement on
+the blackboard (``/executive/press_record``); it fails with ``press: ...`` naming what went wrong:
+a force the arm's servos cannot give from the press pose (the joint and its torque limit), no
+contact, the force too low (with the arm joint at its torque limit, if one is) or too high, or
+leaving the tolerance during the hold.
 """
 
 from __future__ import annotations
@@ -41,12 +46,13 @@ class Press(RobotBehaviour):
         force: the commanded force (N) along the trajectory's push.
         hold_s: how long the force must stay within ``tolerance``.
         tolerance: N either side of ``force``.
-        settle_s: after the trajectory, how long the force may take to come within the tolerance.
+        settle_s: after the touch (or the planned one), how long the force may take to settle.
         gain_p, gain_i: the force loop's proportional gain and integral gain per control period
             (dimensionless: N of servo push per N of force error).
-        seek_speed: m/s the servo target moves on into the surface until the hand touches it (the
-            plan's depth can fall short by the planner's position tolerance).
-        steady_s: the force must stay within the tolerance this long before the hold starts.
+        seek_speed: m/s the target moves at most along the push on the way in, and on past the
+            planned touch until the hand touches (the plan's depth can fall short by the planner's
+            position tolerance). Slow: a stiff arm on a swaying body turns speed into impact force.
+        steady_s: the force must stay within half the tolerance this long before the hold starts.
         ramp_s: at the end, how long the loop's correction takes to fade back to the planned target.
     """
 
@@ -149,7 +155,8 @@ class Press(RobotBehaviour):
         return self._hold(t, f)
 
     def _control(self, f: float) -> None:
-        """The servo push ``_u`` (N): on at ``seek_speed`` until the first touch, then PI on the force."""
+        """The servo push ``_u`` (N): on at ``seek_speed`` until the first touch, then PI on the force
+        (``gain_p`` 0 by default: the integral alone; a proportional share excites the body's sway)."""
         if not self._touched and f <= 0.0:
             self._integral += self.seek_speed * self._robot.control_dt / self._compliance
             self._u = self._integral
