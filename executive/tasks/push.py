@@ -39,9 +39,11 @@ __all__ = [
     "GAP_SIGMAS",
     "TIP_CLEARANCE",
     "PushKind",
+    "PushLine",
     "PushTask",
     "descent_gap",
     "push_force",
+    "push_line",
     "push_steps",
 ]
 
@@ -204,8 +206,18 @@ def _unpushable(step: str, side: str, reason: str) -> PlanningError:
     return PlanningError(step, side, 0.0, 0.0, 0, reason=reason)
 
 
-def push_steps(world: World, task: PushTask, side: str, cfg: CompositionConfig) -> list[Step]:
-    """Above the object's back, down behind it, push to the target, back off, open, home.
+@dataclass(frozen=True)
+class PushLine:
+    """Where a push's hand goes: its site behind the object at the start and end, yaw, direction."""
+
+    start: FloatArray  # hand site, ``descent_gap`` behind the object's face
+    end: FloatArray  # hand site when the object's centre is at the target
+    hand_yaw: float  # the jaws close across the push: the fingers' face leads
+    direction: FloatArray  # unit, horizontal
+
+
+def push_line(world: World, task: PushTask, side: str) -> PushLine:
+    """The hand's line for pushing ``task``'s object with ``side``, its fingers low on the side face.
 
     Raises:
         PlanningError: the object is at the target already, rests on something other than the
@@ -213,7 +225,6 @@ def push_steps(world: World, task: PushTask, side: str, cfg: CompositionConfig) 
     """
     from executive.scenario.scene import vertical_half_extent
 
-    h = HandFrames(world)
     body = _body(world, task.object)
     pos, quat = world.object_pose(task.object)
     table = world.scenario.scene.table.height
@@ -236,17 +247,27 @@ def push_steps(world: World, task: PushTask, side: str, cfg: CompositionConfig) 
             f"'{task.object}' is {height * 100:.1f} cm tall: the fingertips stay "
             f"{TIP_CLEARANCE * 100:.1f} cm above the table and would pass over it",
         )
-    hand_yaw = math.atan2(u[1], u[0])  # the jaws close across the push: the fingers' face leads
-    probe = h.target(side, np.zeros(3), hand_yaw)
+    hand_yaw = math.atan2(u[1], u[0])
+    probe = HandFrames(world).target(side, np.zeros(3), hand_yaw)
     reach, top = _hand_face(world, side, probe.quat, u, (site_height - height, site_height))
     half = _half_extent(body, quat, u)
     _check_slides(world, task.object, side, half, (TIP_CLEARANCE, min(height, site_height + top)))
-    behind = half + reach
     z = table + site_height
-    start = np.array([pos[0], pos[1], z]) - (behind + descent_gap(world)) * u
-    end = np.array([task.to[0], task.to[1], z]) - behind * u
-    force = push_force(world, task.object) * u
-    obj = task.object
+    start = np.array([pos[0], pos[1], z]) - (half + reach + descent_gap(world)) * u
+    end = np.array([task.to[0], task.to[1], z]) - (half + reach) * u
+    return PushLine(start, end, hand_yaw, u)
+
+
+def push_steps(world: World, task: PushTask, side: str, cfg: CompositionConfig) -> list[Step]:
+    """Above the object's back, down behind it, push to the target in legs, back off, open, home.
+
+    Raises:
+        PlanningError: as :func:`push_line`.
+    """
+    h = HandFrames(world)
+    line = push_line(world, task, side)
+    start, end, yaw, obj = line.start, line.end, line.hand_yaw, task.object
+    force = tuple(float(f) for f in push_force(world, obj) * line.direction)
     # The planner's hand heads straight for its goal from wherever it is, and drifts off a long
     # line towards its posture; short legs keep it on the object's side face.
     legs = max(1, math.ceil(float(np.linalg.norm(end - start)) / PUSH_LEG))
@@ -255,24 +276,19 @@ def push_steps(world: World, task: PushTask, side: str, cfg: CompositionConfig) 
             "push",
             f"{side}.push" if k == legs else f"{side}.push_{k}",
             side,
-            (h.target(side, start + (end - start) * k / legs, hand_yaw),),
+            (h.target(side, start + (end - start) * k / legs, yaw),),
             carried=(side, obj),
             allow_contact=(obj, "table_top"),
-            force=(float(force[0]), float(force[1]), float(force[2])),
+            force=(force[0], force[1], force[2]),
         )
         for k in range(1, legs + 1)
     ]
+    back = end - CONTACT_GAP * line.direction + cfg.approach_height * UP
     return [
-        Step("move", f"{side}.pre_push", side, (h.target(side, start + cfg.approach_height * UP, hand_yaw),)),
-        Step("push", f"{side}.down", side, (h.target(side, start, hand_yaw),), allow_contact=(obj,)),
+        Step("move", f"{side}.pre_push", side, (h.target(side, start + cfg.approach_height * UP, yaw),)),
+        Step("push", f"{side}.down", side, (h.target(side, start, yaw),), allow_contact=(obj,)),
         *pushes,
-        Step(
-            "retreat",
-            f"{side}.retreat",
-            side,
-            (h.target(side, end - CONTACT_GAP * u + cfg.approach_height * UP, hand_yaw),),
-            allow_contact=(obj,),
-        ),
+        Step("retreat", f"{side}.retreat", side, (h.target(side, back, yaw),), allow_contact=(obj,)),
         Step("release", f"{side}.open", side, obj=obj),
         Step("home", f"{side}.home", side, (h.home[side],), obj=obj),
     ]
