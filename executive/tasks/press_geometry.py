@@ -111,7 +111,11 @@ def _support(model: mujoco.MjModel, geom: int, axes: FloatArray, direction: Floa
         return float(size[1] * along[2] + size[0] * math.sqrt(max(0.0, 1.0 - along[2] ** 2)))
     if kind == mujoco.mjtGeom.mjGEOM_ELLIPSOID:
         return float(np.linalg.norm(size * (axes.T @ direction)))
-    return float(model.geom_rbound[geom])  # a mesh: its bounding sphere
+    mesh = int(model.geom_dataid[geom])
+    if kind == mujoco.mjtGeom.mjGEOM_MESH and mesh >= 0:  # its vertices, in the geom's frame
+        start, count = int(model.mesh_vertadr[mesh]), int(model.mesh_vertnum[mesh])
+        return float(np.max(model.mesh_vert[start : start + count] @ (axes.T @ direction)))
+    return float(model.geom_rbound[geom])  # anything else: its bounding sphere
 
 
 def hand_lead(world: World, side: str) -> float:
