@@ -303,3 +303,39 @@ def test_the_press_reaction_moves_the_zmp(planner: Planner) -> None:
     weight = world.robot_mass * -world.model.opt.gravity[2]
     lever = np.linalg.norm(press.com_path[:, :2] - press.hand_paths["right"][:, :2], axis=1)
     assert pressed.details["max_zmp_shift"] == pytest.approx(15.0 * lever.max() / (weight - 15.0), rel=0.02)
+
+
+def test_the_g1_presses_with_its_dex3_hand(g1_mjcf: Path) -> None:
+    doc = {
+        "name": "g1_press",
+        "robot": {"mjcf": str(g1_mjcf), "profile": "unitree_g1"},
+        "scene": {
+            "table": {"position": [0.47, 0.0], "size": [0.50, 1.0, 0.04], "height": 0.66},
+            "objects": [
+                {
+                    "name": "book",
+                    "shape": "box",
+                    "size": [0.14, 0.09, 0.04],
+                    "position": [0.30, 0.22],
+                    "mass": 0.3,
+                }
+            ],
+            "obstacles": [
+                {"name": "panel", "shape": "box", "size": [0.12, 0.12, 0.05], "position": [0.32, -0.18]}
+            ],
+        },
+        "mission": [
+            {"press": {"target": "panel", "point": [0.32, -0.18, 0.71], "force": 10, "duration": 1.0}}
+        ],
+    }
+    scenario = from_dict(doc)
+    world = build(scenario)
+    task = scenario.mission[0]
+    assert isinstance(task, PressTask)
+    result = execute_plan(plan_alternative(Planner(world), world, task, "right"), build(scenario), task)
+    assert result.outcome == "success", result.message
+    verdict = PressKind().verify(task, world, None)
+    assert verdict is not None and verdict.event == "pressed"
+    assert (
+        9.0 <= verdict.fields["min_n"] and verdict.fields["max_n"] <= 11.0 and verdict.fields["held_s"] >= 1.0
+    )
