@@ -1,34 +1,14 @@
 """Monte Carlo validation campaigns: does the predicted risk predict real failures?
 
-A campaign runs N trials of every alternative of one task.
-Trial ``i`` of every alternative uses the same truth: a perturbation drawn from the
-scenario's uncertainty with the generator seeded ``trials.seed + i`` (common random
-numbers: the alternatives are compared on the same worlds). A trial
-
-1. takes the alternative's plan and predicted risk report on the *estimate*
-   (planned once per alternative: the estimate is the same in every trial, and
-   planning is deterministic, so planning it again per trial would give the same
-   plan at a hundred times the cost);
-2. builds the truth world of its perturbation (object and obstacle poses, object
-   mass, friction, the robot's CoM offset);
-3. executes the plan in physics with the alternative forced (no selection, no
-   approval, no live guards: the question is what the plan does, not whether a
-   guard would stop it) and records the failure detectors' verdict.
-
-Outcomes: ``success``, or the detector's failure mode ``collision``, ``fall``,
-``drop``, ``unstable``, or ``timeout`` (not finished in the time limit);
-``infeasible`` when the alternative does not plan (no trial is executed) and
-``error`` when the trial's code raised (a defect; counted, never hidden).
-
-Results stream to ``trials.jsonl`` in the run folder, in trial order whatever the
-number of jobs, one line per trial, flushed and fsync'ed as it is written; the
-lines hold no timings, so the same seed gives the same file. ``--resume``
-completes an interrupted campaign (or extends it to more trials). At the end
-``summary.json``, ``table.md`` and ``reliability.png`` are written.
-
-Backends: ``local`` (this process for one job, else a pool of spawned processes)
-and ``ray`` (Ray tasks, ``pip install .[cluster]``; a running cluster is used
-when ``RAY_ADDRESS`` is set, else a local Ray instance with ``jobs`` CPUs).
+:func:`run_campaign` runs N trials (:func:`run_trial`) of every alternative of one task; trial
+``i`` of every alternative executes on the same sampled truth (seed ``trials.seed + i``: common
+random numbers, so the alternatives are compared on the same worlds). Results stream to
+``trials.jsonl`` in the run folder (in trial order whatever the number of jobs, fsync'ed, no
+timings: the same seed gives the same file; ``--resume`` completes a cut campaign); at the end
+:func:`summarise` scores the predictions against the outcomes into ``summary.json``, ``table.md``
+and ``reliability.png``. Backends: ``local`` (this process for one job, else a pool of spawned
+processes) and ``ray`` (Ray tasks, ``pip install .[cluster]``; the cluster at ``RAY_ADDRESS``,
+else a local one with ``jobs`` CPUs).
 """
 
 from __future__ import annotations
@@ -46,7 +26,7 @@ import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import IO, TYPE_CHECKING, Any, Literal
+from typing import IO, TYPE_CHECKING, Any, Literal, NamedTuple
 
 import numpy as np
 from numpy.typing import NDArray
@@ -88,6 +68,7 @@ _FORECASTS = {**PREDICTOR, "any": "combined"}
 Backend = Literal["local", "ray"]
 FloatArray = NDArray[np.float64]
 BoolArray = NDArray[np.bool_]
+_ByMode = dict[str, float | None]  # a score per failure mode (None: not defined)
 
 
 @dataclass(frozen=True)
@@ -248,8 +229,18 @@ def run_trial(
 ) -> dict[str, Any]:
     """Execute one trial; the record written to ``trials.jsonl`` (JSON-safe, no timings).
 
-    ``prediction``: the alternative planned on the scenario's fixed estimate (None: plan it
-    here, on the trial's own scene, as a scenario with a scene variation needs).
+    The trial takes the alternative's plan and predicted risk on the *estimate*, builds the
+    truth world of its perturbation (object and obstacle poses, object mass, friction, the
+    robot's CoM offset) and executes the plan in physics with the alternative forced (no
+    selection, no approval, no live guards: the question is what the plan does, not whether a
+    guard would stop it). Outcome: ``success``, or the detectors' failure mode ``collision``,
+    ``fall``, ``drop``, ``unstable`` or ``timeout`` (not finished in the time limit);
+    ``infeasible`` when the alternative does not plan (nothing is executed) and ``error`` when
+    the trial's code raised (a defect; counted, never hidden).
+
+    ``prediction``: the alternative planned on the scenario's fixed estimate, once per
+    alternative (planning is deterministic: planning again per trial gives the same plan);
+    None: plan it here, on the trial's own scene, as a scenario with a scene variation needs.
     """
     from executive.runtime.runner import execute_plan
     from executive.world.model import build
@@ -564,61 +555,15 @@ def summarise(
 ) -> dict[str, Any]:
     """Per alternative: trials, failures by mode, failure rates with 95% Clopper-Pearson
     intervals, mean predicted risk; overall: AUC, Brier and ECE per mode and Spearman."""
-    from executive.validation.stats import brier, expected_calibration_error, roc_auc, spearman
+    from executive.validation.stats import spearman
 
     executed = _executed(records)
-    per_alt = []
     ordering = scenario.risk.ordering
-    for name in alternatives:
-        mine = [r for r in executed if r["alternative"] == name]
-        n = len(mine)
-        failures = {m: sum(r["outcome"] == m for r in mine) for m in FAILURE_MODES}
-        failures["any"] = sum(r["outcome"] != "success" for r in mine)
-        prediction = predictions.get(name)
-        predicted: dict[str, float | None] = {}
-        if mine:
-            keys = ("collision", "fall", "grasp", "combined", "weighted_sum", "expected_loss")
-            predicted = {k: float(np.mean([r["predicted"][k] for r in mine])) for k in keys}
-            # the number the selector ranked by (fused with the rollouts when they ran)
-            # (None: the executive would never run it, its dry run failed)
-            values = [r["predicted"].get("value", r["predicted"][ordering]) for r in mine]
-            predicted["value"] = None if None in values else float(np.mean(values))
-        per_alt.append(
-            {
-                "name": name,
-                "feasible": bool(prediction.feasible) if prediction else None,
-                "error": prediction.error
-                if prediction and (not prediction.feasible or prediction.value is None)
-                else "",
-                "physics": prediction.physics if prediction else None,
-                "trials": n,
-                "errors": sum(r["outcome"] == "error" for r in records if r["alternative"] == name),
-                "infeasible": sum(r["outcome"] == "infeasible" for r in records if r["alternative"] == name),
-                "failures": failures,
-                "failure_rate": _rate(failures["any"], n),
-                "failure_rate_by_mode": {m: _rate(failures[m], n) for m in FAILURE_MODES},
-                "predicted": predicted,
-            }
-        )
-    auc: dict[str, float | None] = {}
-    # The best AUC any prediction that is the same for every trial of an alternative can reach:
-    # score each trial by its alternative's observed rate of that mode (an oracle ranking). With
-    # one fixed estimate every trial of an alternative has the same prediction, so the AUC of
-    # the risk models is bounded by this, however good they are.
-    ceiling: dict[str, float | None] = {}
-    brier_by: dict[str, float | None] = {}
-    ece_by: dict[str, float | None] = {}
-    observed_by: dict[str, int] = {}
-    for mode, _, p, y in _forecasts(executed):
-        observed_by[mode] = int(y.sum())
-        auc[mode] = _finite(roc_auc(p, y))
-        rate = {
-            a: float(np.mean([yy for r, yy in zip(executed, y, strict=True) if r["alternative"] == a]))
-            for a in {r["alternative"] for r in executed}
-        }
-        ceiling[mode] = _finite(roc_auc([rate[r["alternative"]] for r in executed], y))
-        brier_by[mode] = _finite(brier(p, y))
-        ece_by[mode] = _finite(expected_calibration_error(p, y))
+    per_alt = [
+        _alternative_summary(name, executed, records, predictions.get(name), ordering)
+        for name in alternatives
+    ]
+    observed_by, auc, ceiling, brier_by, ece_by = _forecast_scores(executed)
     ran = [a for a in per_alt if a["trials"]]
     rho = {
         q: _finite(spearman([a["predicted"][q] for a in ran], [a["failure_rate"]["value"] for a in ran]))
@@ -639,6 +584,73 @@ def summarise(
         "spearman_by": rho,
         "predictor": dict(_FORECASTS),
     }
+
+
+def _alternative_summary(
+    name: str,
+    executed: Sequence[dict[str, Any]],
+    records: Sequence[dict[str, Any]],
+    prediction: Prediction | None,
+    ordering: str,
+) -> dict[str, Any]:
+    """One alternative's row of the summary: its trials, failures by mode and rates, and its
+    mean predicted risk over its executed trials."""
+    mine = [r for r in executed if r["alternative"] == name]
+    n = len(mine)
+    failures = {m: sum(r["outcome"] == m for r in mine) for m in FAILURE_MODES}
+    failures["any"] = sum(r["outcome"] != "success" for r in mine)
+    predicted: dict[str, float | None] = {}
+    if mine:
+        keys = ("collision", "fall", "grasp", "combined", "weighted_sum", "expected_loss")
+        predicted = {k: float(np.mean([r["predicted"][k] for r in mine])) for k in keys}
+        # the number the selector ranked by (fused with the rollouts when they ran)
+        # (None: the executive would never run it, its dry run failed)
+        values = [r["predicted"].get("value", r["predicted"][ordering]) for r in mine]
+        predicted["value"] = None if None in values else float(np.mean(values))
+    return {
+        "name": name,
+        "feasible": bool(prediction.feasible) if prediction else None,
+        "error": prediction.error
+        if prediction and (not prediction.feasible or prediction.value is None)
+        else "",
+        "physics": prediction.physics if prediction else None,
+        "trials": n,
+        "errors": sum(r["outcome"] == "error" for r in records if r["alternative"] == name),
+        "infeasible": sum(r["outcome"] == "infeasible" for r in records if r["alternative"] == name),
+        "failures": failures,
+        "failure_rate": _rate(failures["any"], n),
+        "failure_rate_by_mode": {m: _rate(failures[m], n) for m in FAILURE_MODES},
+        "predicted": predicted,
+    }
+
+
+def _forecast_scores(
+    executed: Sequence[dict[str, Any]],
+) -> tuple[dict[str, int], _ByMode, _ByMode, _ByMode, _ByMode]:
+    """Per failure mode (and "any"): the failures observed, the ROC AUC of its predictor, the
+    best AUC of a prediction constant per alternative, the Brier score and the ECE."""
+    from executive.validation.stats import brier, expected_calibration_error, roc_auc
+
+    auc: _ByMode = {}
+    # The best AUC any prediction that is the same for every trial of an alternative can reach:
+    # score each trial by its alternative's observed rate of that mode (an oracle ranking). With
+    # one fixed estimate every trial of an alternative has the same prediction, so the AUC of
+    # the risk models is bounded by this, however good they are.
+    ceiling: _ByMode = {}
+    brier_by: _ByMode = {}
+    ece_by: _ByMode = {}
+    observed_by: dict[str, int] = {}
+    for mode, _, p, y in _forecasts(executed):
+        observed_by[mode] = int(y.sum())
+        auc[mode] = _finite(roc_auc(p, y))
+        rate = {
+            a: float(np.mean([yy for r, yy in zip(executed, y, strict=True) if r["alternative"] == a]))
+            for a in {r["alternative"] for r in executed}
+        }
+        ceiling[mode] = _finite(roc_auc([rate[r["alternative"]] for r in executed], y))
+        brier_by[mode] = _finite(brier(p, y))
+        ece_by[mode] = _finite(expected_calibration_error(p, y))
+    return observed_by, auc, ceiling, brier_by, ece_by
 
 
 def _pct(rate: dict[str, Any]) -> str:
@@ -867,10 +879,58 @@ def run_campaign(
     stream: IO[str] | None = None,
 ) -> CampaignResult:
     """Run (or complete) a campaign; write trials.jsonl, summary.json, table.md, reliability.png."""
-    from executive.cli.progress_bar import ProgressBar
-    from executive.decision.audit import atomic_write_text, run_folder, to_json, write_summary
-
     n = scenario.trials.count if trials is None else trials
+    names = _check_request(scenario, n, jobs, backend, task_index, alternatives)
+    task = scenario.mission[task_index]
+    base_seed = scenario.trials.seed if seed is None else seed
+    folder = _campaign_folder(scenario, out, resume)
+    trials_path = folder / "trials.jsonl"
+    config = _campaign_config(scenario, base_seed, task_index, names, n)
+    lock = _claim_folder(folder, trials_path, config, resume)  # held until the summary is written
+    records, duplicates, beyond = unique_trials(read_trials(trials_path, repair=True), n, names)
+    done = {(r["trial"], r["alternative"]) for r in records}
+    specs = [(i, a, trial_seed(base_seed, i)) for i in range(n) for a in names if (i, a) not in done]
+    log = print if stream is None else (lambda text: (stream.write(text + "\n"), stream.flush()))
+    log(
+        f"campaign {scenario.name}: task {task_index} ({task.object}), "
+        f"{n} trials x {len(names)} alternatives "
+        f"({', '.join(names)}), seed {base_seed}, {jobs} job(s) on {backend}; run folder {folder}"
+    )
+    _log_resumed(log, trials_path, len(records), len(specs), duplicates, beyond, n)
+    run = _execute(scenario, task_index, jobs, backend, folder, names, specs, records, log, stream)
+    records.sort(
+        key=lambda r: (r["trial"], names.index(r["alternative"]) if r["alternative"] in names else 0)
+    )
+    summary = summarise(scenario, records, names, run.predictions)
+    summary.update(
+        task=f"{task_index}: transfer {task.object}",
+        seed=base_seed,
+        trials_per_alternative=n,
+        complete=len(records) == n * len(names),
+        jobs=jobs,
+        backend=backend,
+        elapsed_s=run.elapsed,
+        new_trials=run.new,
+        trials_per_s=run.new / run.elapsed if run.elapsed > 0 else None,
+        trial_phase_s=_finite(run.trial_phase),  # executing trials only (after planning, before statistics)
+        duplicates_ignored=duplicates,
+        records_beyond_trials=beyond,
+    )
+    _write_results(folder, summary, records)
+    lock.release()
+    return CampaignResult(folder, summary, records, run.new, run.elapsed, run.interrupted)
+
+
+def _check_request(
+    scenario: Scenario,
+    n: int,
+    jobs: int,
+    backend: str,
+    task_index: int,
+    alternatives: Sequence[str] | None,
+) -> list[str]:
+    """The alternatives a campaign runs; ExecutiveError naming a bad trials, jobs, backend, task
+    or alternative."""
     if n < 1:
         raise ExecutiveError(f"--trials must be at least 1; got {n}")
     if jobs < 1:
@@ -887,15 +947,14 @@ def run_campaign(
             f"task {task_index} of {scenario.name} has no alternative {', '.join(unknown)}; "
             f"its alternatives are: {', '.join(task.alternatives)}"
         )
-    base_seed = scenario.trials.seed if seed is None else seed
-    if out is None:
-        if resume:
-            raise ExecutiveError("--resume needs --out DIR: the run folder of the campaign to complete")
-        folder = run_folder(f"{scenario.name}-campaign")
-    else:
-        folder = Path(out)
-    trials_path = folder / "trials.jsonl"
-    config = {
+    return names
+
+
+def _campaign_config(
+    scenario: Scenario, base_seed: int, task_index: int, names: list[str], n: int
+) -> dict[str, Any]:
+    """What campaign.json records: the scenario (and its SHA-256), seed, task, alternatives, trials."""
+    return {
         "scenario": scenario.name,
         "source": str(scenario.source) if scenario.source else None,
         "scenario_sha256": _fingerprint(scenario),
@@ -904,6 +963,22 @@ def run_campaign(
         "alternatives": names,
         "trials": n,
     }
+
+
+def _campaign_folder(scenario: Scenario, out: Path | str | None, resume: bool) -> Path:
+    """The run folder: ``out``, or a new one under runs/ (not when resuming: that needs ``out``)."""
+    from executive.decision.audit import run_folder
+
+    if out is not None:
+        return Path(out)
+    if resume:
+        raise ExecutiveError("--resume needs --out DIR: the run folder of the campaign to complete")
+    return run_folder(f"{scenario.name}-campaign")
+
+
+def _claim_folder(folder: Path, trials_path: Path, config: dict[str, Any], resume: bool) -> FolderLock:
+    """Check that ``folder`` holds the campaign ``config`` asks for when resuming (else no trials
+    yet), create it, lock it and write ``config`` to it. Returns the lock."""
     if resume:
         _check_resume(folder, config)
     elif trials_path.exists() and trials_path.stat().st_size > 0:
@@ -912,20 +987,17 @@ def run_campaign(
             "or choose another --out"
         )
     folder.mkdir(parents=True, exist_ok=True)
-    lock = FolderLock(folder)  # held until the summary is written
+    lock = FolderLock(folder)
     _write_config(folder, config)
+    return lock
 
-    records, duplicates, beyond = unique_trials(read_trials(trials_path, repair=True), n, names)
-    done = {(r["trial"], r["alternative"]) for r in records}
-    specs = [(i, a, trial_seed(base_seed, i)) for i in range(n) for a in names if (i, a) not in done]
-    log = print if stream is None else (lambda text: (stream.write(text + "\n"), stream.flush()))
-    log(
-        f"campaign {scenario.name}: task {task_index} ({task.object}), "
-        f"{n} trials x {len(names)} alternatives "
-        f"({', '.join(names)}), seed {base_seed}, {jobs} job(s) on {backend}; run folder {folder}"
-    )
-    if records:
-        log(f"resuming: {len(records)} trial(s) already in {trials_path.name}, {len(specs)} to run")
+
+def _log_resumed(
+    log: Callable[[str], Any], trials_path: Path, kept: int, to_run: int, duplicates: int, beyond: int, n: int
+) -> None:
+    """Say what a resumed campaign found in its trials file."""
+    if kept:
+        log(f"resuming: {kept} trial(s) already in {trials_path.name}, {to_run} to run")
     if duplicates:
         log(
             f"  {duplicates} duplicated record(s) in {trials_path.name} "
@@ -933,28 +1005,46 @@ def run_campaign(
         )
     if beyond:
         log(f"  {beyond} record(s) beyond --trials {n} in {trials_path.name}: kept there, not counted")
+
+
+class _Execution(NamedTuple):
+    """What :func:`_execute` did: the trials it ran, whether Ctrl-C cut it, the alternatives'
+    predictions, the seconds of the trial phase (nan if cut) and in all."""
+
+    new: int
+    interrupted: bool
+    predictions: dict[str, Prediction]
+    trial_phase: float
+    elapsed: float
+
+
+def _execute(
+    scenario: Scenario,
+    task_index: int,
+    jobs: int,
+    backend: Backend,
+    folder: Path,
+    names: list[str],
+    specs: list[tuple[int, str, int]],
+    records: list[dict[str, Any]],
+    log: Callable[[str], Any],
+    stream: IO[str] | None,
+) -> _Execution:
+    """Predict the alternatives (unless the scene varies) and run the trials ``specs``, each
+    appended to ``records`` and to trials.jsonl as it ends, with a progress bar. Ctrl-C stops
+    the workers; every finished trial is already on disk."""
+    from executive.cli.progress_bar import ProgressBar
+
     t0 = time.perf_counter()
     runner = _Runner(scenario, task_index, jobs, backend, folder)
     interrupted = False
     new = 0
-    trial_log = TrialLog(trials_path)
+    trial_log = TrialLog(folder / "trials.jsonl")
     bar: ProgressBar | None = None
     predictions: dict[str, Prediction] = {}
     trial_phase = float("nan")
     try:
-        varied = not scenario.trials.scene_variation.is_zero()
-        if varied:
-            log("the scene varies from trial to trial (trials.scene_variation): each trial plans on its own")
-            log("  (its predictions are analytic: dry runs and rollouts check one fixed estimate)")
-            if scenario.trials.scene_variation.varies_perception:
-                low, high = scenario.trials.scene_variation.perception_scale
-                log(f"  and so does the perception: pose sigmas x {low:g} to x {high:g} (log-uniform)")
-        else:
-            log(f"planning {', '.join(names)} on the estimate")
-            predictions = runner.predict(names)
-            predictions = runner.use(check_predictions(scenario, predictions, runner.run_jobs, log))
-        for name in predictions:
-            log(f"  {name:<15} {_prediction_text(predictions[name], scenario.risk.ordering)}")
+        _predict(predictions, scenario, runner, names, log)
         t_trials = time.perf_counter()
         bar = ProgressBar(len(records) + len(specs), done=len(records), stream=stream)
         bar.draw(force=True)
@@ -976,28 +1066,41 @@ def run_campaign(
     finally:
         trial_log.close()
         runner.close(terminate=True)
-    elapsed = time.perf_counter() - t0
-    records.sort(
-        key=lambda r: (r["trial"], names.index(r["alternative"]) if r["alternative"] in names else 0)
-    )
-    summary = summarise(scenario, records, names, predictions)
-    summary.update(
-        task=f"{task_index}: transfer {task.object}",
-        seed=base_seed,
-        trials_per_alternative=n,
-        complete=len(records) == n * len(names),
-        jobs=jobs,
-        backend=backend,
-        elapsed_s=elapsed,
-        new_trials=new,
-        trials_per_s=new / elapsed if elapsed > 0 else None,
-        trial_phase_s=_finite(trial_phase),  # executing trials only (after planning, before statistics)
-        duplicates_ignored=duplicates,
-        records_beyond_trials=beyond,
-    )
+    return _Execution(new, interrupted, predictions, trial_phase, time.perf_counter() - t0)
+
+
+def _predict(
+    predictions: dict[str, Prediction],
+    scenario: Scenario,
+    runner: _Runner,
+    names: list[str],
+    log: Callable[[str], Any],
+) -> None:
+    """Fill ``predictions`` with the alternatives planned and then checked on the estimate (in
+    place, so that a Ctrl-C between the two keeps the plans), and log them; none when the scene
+    varies from trial to trial (each trial then plans on its own)."""
+    variation = scenario.trials.scene_variation
+    if not variation.is_zero():
+        log("the scene varies from trial to trial (trials.scene_variation): each trial plans on its own")
+        log("  (its predictions are analytic: dry runs and rollouts check one fixed estimate)")
+        if variation.varies_perception:
+            low, high = variation.perception_scale
+            log(f"  and so does the perception: pose sigmas x {low:g} to x {high:g} (log-uniform)")
+    else:
+        log(f"planning {', '.join(names)} on the estimate")
+        predictions.update(runner.predict(names))
+        checked = runner.use(check_predictions(scenario, dict(predictions), runner.run_jobs, log))
+        predictions.clear()
+        predictions.update(checked)
+    for name in predictions:
+        log(f"  {name:<15} {_prediction_text(predictions[name], scenario.risk.ordering)}")
+
+
+def _write_results(folder: Path, summary: dict[str, Any], records: list[dict[str, Any]]) -> None:
+    """summary.json, table.md and (when any trial ran) reliability.png in ``folder``."""
+    from executive.decision.audit import atomic_write_text, to_json, write_summary
+
     write_summary(folder, to_json(summary))
     atomic_write_text(folder / "table.md", table_markdown(summary) + "\n")
     if records:
         _reliability(records, folder / "reliability.png")
-    lock.release()
-    return CampaignResult(folder, summary, records, new, elapsed, interrupted)
