@@ -36,6 +36,7 @@ from executive.world.observation import (
     Observation,
     SimulatedSensor,
     confirmed_holding,
+    holders,
     refresh,
     update_estimate,
 )
@@ -244,6 +245,11 @@ def test_a_host_robot_supplies_what_it_sees() -> None:
     assert np.allclose(estimate.object_pose("book")[0], seen[0])
 
 
+def test_an_object_in_two_hands_is_held_by_the_hand_that_grasped_it_first() -> None:
+    assert holders({"left": "book", "right": "book"}) == {"book": "left"}
+    assert holders({"right": "book", "left": "cup"}) == {"book": "right", "cup": "left"}
+
+
 # --- a held object ------------------------------------------------------------------------------
 
 
@@ -285,8 +291,7 @@ def test_a_held_object_is_known_held_and_moves_with_the_hand(two_tasks: Path) ->
     assert travel > 0.2  # a real motion: lift, carry, put down
     assert max(errors) < 0.005, max(errors)
     assert object_contacts(robot, "left", "box_a")[0] == 0  # released ...
-    refresh(estimate, robot, dict(bb.holding), "after_task")
-    assert (
-        estimate.held_by("box_a") is None and estimate.held == {} and estimate.grips == {}
-    )  # ... and known so
+    look = refresh(estimate, robot, dict(bb.holding), "after_task")  # ... and known so:
+    assert estimate.held_by("box_a") is None and estimate.held == {} and estimate.grips == {}
+    assert look["holding"] == {} and look["objects"][0]["held_by"] is None
     tree.shutdown()

@@ -283,9 +283,8 @@ class RiskSelector(py_trees.composites.Composite):
         The robot's grasp record (``holding``) loses a hand whose touch no longer holds its object.
         """
         robot = self.bb.robot
-        holding = dict(self.bb.holding)
-        fields = refresh(self.estimate, robot, holding, reason)
-        self.bb.holding = {s: o for s, o in holding.items() if self.estimate.held_by(o) == s}
+        fields = refresh(self.estimate, robot, dict(self.bb.holding), reason)
+        self.bb.holding = dict(fields["holding"])
         self._last_look = robot.time
         self.log.record("observation", task=self.name, **fields)
 

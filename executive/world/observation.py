@@ -47,6 +47,7 @@ __all__ = [
     "Observation",
     "SimulatedSensor",
     "confirmed_holding",
+    "holders",
     "look",
     "refresh",
     "update_estimate",
@@ -68,7 +69,7 @@ class Observation:
     """One look at the scene.
 
     objects: name -> (position, quaternion w x y z) of each object seen.
-    holding: object -> side of the hand that holds it (the robot's record, confirmed by touch).
+    holding: side -> object each hand holds (the robot's record, confirmed by touch).
     source: where the poses came from, for the log (``{"source": "simulated", ...}`` or
         ``{"source": "host"}``; ``{"source": "none"}`` for a robot that sees nothing).
     time: the robot's time (s).
@@ -144,14 +145,26 @@ def _holds(robot: Any, side: str, obj: str) -> bool:
 
 
 def confirmed_holding(robot: Any, holding: Mapping[str, str]) -> dict[str, str]:
-    """The objects the robot's record says it holds and its touch confirms: object -> side.
+    """The entries of the robot's grasp record its touch confirms: side -> object.
 
     Args:
         robot: the robot (``hand_contacts(side, obj)`` if it senses touch, else its ``world``'s
             MuJoCo contacts are counted).
         holding: the robot's grasp record, side -> object (the blackboard's ``holding``).
     """
-    return {obj: side for side, obj in holding.items() if _holds(robot, side, obj)}
+    return {side: obj for side, obj in holding.items() if _holds(robot, side, obj)}
+
+
+def holders(holding: Mapping[str, str]) -> dict[str, str]:
+    """Object -> the side that holds it, from a confirmed record (side -> object).
+
+    An object in two hands (a handover midway) is given to the hand that grasped it first (the
+    first in the record): the giver, which holds it until it lets go.
+    """
+    held: dict[str, str] = {}
+    for side, obj in holding.items():
+        held.setdefault(obj, side)
+    return held
 
 
 def look(robot: Any, holding: Mapping[str, str]) -> Observation:
@@ -192,8 +205,9 @@ def update_estimate(world: World, q: FloatArray, seen: Observation) -> list[dict
     sites.qpos[:] = q
     mujoco.mj_kinematics(world.model, sites)
     records = []
+    held = holders(seen.holding)
     for name, adr in world.ids.object_qpos.items():
-        side = seen.holding.get(name)
+        side = held.get(name)
         pose = seen.objects.get(name)
         if side is None:
             world.held.pop(name, None)
@@ -292,11 +306,18 @@ def refresh(world: World, robot: Any, holding: Mapping[str, str], reason: str) -
         reason: one of :data:`REASONS`.
 
     Returns:
-        ``reason``, ``source``, ``time`` and ``objects`` (the records of :func:`update_estimate`),
-        for ``AuditLog.record("observation", ...)``.
+        ``reason``, ``source``, ``time``, ``objects`` (the records of :func:`update_estimate`)
+        and ``holding`` (the grasp record as touch confirms it, side -> object), for
+        ``AuditLog.record("observation", ...)``.
     """
     if reason not in REASONS:
         raise ValueError(f"observation reason {reason!r} is not one of {REASONS}")
     seen = look(robot, holding)
     records = update_estimate(world, np.asarray(robot.data.qpos, dtype=float), seen)
-    return {"reason": reason, "source": seen.source, "time": seen.time, "objects": records}
+    return {
+        "reason": reason,
+        "source": seen.source,
+        "time": seen.time,
+        "objects": records,
+        "holding": dict(seen.holding),
+    }
