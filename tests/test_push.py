@@ -19,7 +19,8 @@ from executive.decision.assessment import AlternativeRisk, assess_task
 from executive.errors import ScenarioError
 from executive.monitoring.detectors import FailureDetector
 from executive.planning.planner import Planner, PlanningError
-from executive.risk.fall import zero_moment_points
+from executive.planning.timing import Trajectory
+from executive.risk.fall import ExternalForce, assess_fall, zero_moment_points
 from executive.risk.gaussian import normal_cdf
 from executive.risk.rollouts import RolloutJob, estimate_scenario, rollout_seed, run_job
 from executive.robot.simulated import SimulatedRobot
@@ -230,3 +231,31 @@ def test_the_zmp_moves_as_the_feet_feel_it(tmp_path: Path, force: tuple[float, f
     assert float(np.linalg.norm(shift)) > 0.07
     error = np.mean(measured, axis=0) - np.mean(predicted, axis=0)
     assert float(np.linalg.norm(error)) < 0.1 * float(np.linalg.norm(shift))
+
+
+@pytest.mark.parametrize(("push", "falls"), [(100.0, False), (180.0, True)])
+def test_a_hand_force_beyond_the_tipping_force_topples_the_robot(
+    tmp_path: Path, push: float, falls: bool
+) -> None:
+    """No arm of this humanoid can push that hard, so the force is applied directly: the reaction of
+    a forward push at the palm of the standing robot. The fall model predicts < 1 % at 100 N (the ZMP
+    3 cm inside the heels) and > 90 % at 180 N (2 cm beyond them); physics stands, and falls."""
+    scenario = load(write(tmp_path, scenario_text()))
+    world = build(scenario)
+    m, d = world.model, world.data
+    palm, base = m.body("left_palm").id, world.ids.base_body
+    mujoco.mj_forward(m, d)
+    home = world.home_qpos()
+    com = np.tile(d.subtree_com[base], (2, 1))
+    still = Trajectory("still", np.array([0.0, 1.0]), np.tile(home, (2, 1)), {}, com, None)
+    force = ExternalForce(np.tile([push, 0.0, 0.0], (2, 1)), np.tile(d.xipos[palm], (2, 1)))
+    predicted = assess_fall(world, still, scenario.risk, scenario.uncertainty, force).probability
+    robot = SimulatedRobot(world, control_dt=0.02, detector=FailureDetector(world))
+    robot.hold()
+    d.xfrc_applied[palm, :3] = (-push, 0.0, 0.0)
+    for _ in range(150):
+        if robot.advance() is not None:
+            break
+    failure = robot.failure
+    assert (failure is not None and failure.mode == "fall") == falls, failure
+    assert predicted > 0.9 if falls else predicted < 0.01
