@@ -22,10 +22,12 @@ import numpy as np
 import pytest
 
 import behaviours.press as press_behaviour
-from executive.decision.assessment import concatenate
+from executive.decision.assessment import assess_task, concatenate
 from executive.errors import ScenarioError
 from executive.monitoring.detectors import FailureDetector
 from executive.planning.planner import Planner
+from executive.risk.fall import assess_fall
+from executive.risk.press import press_forces
 from executive.runtime.mission import Executive
 from executive.runtime.runner import execute_plan
 from executive.scenario import from_dict
@@ -280,29 +282,36 @@ def test_the_executive_presses_and_logs_pressed(tmp_path: Path) -> None:
 
 
 def test_the_press_reaction_moves_the_zmp(planner: Planner) -> None:
-    fall = pytest.importorskip("executive.risk.fall")
-    if not hasattr(fall, "ExternalForce"):
-        pytest.skip("the fall model takes no external force yet")
     world = planner.world
     task = world.scenario.mission[0]
     plan = plan_alternative(planner, world, task, "right")
-    whole = concatenate(plan.ordered_trajectories(), plan.name)
-    forces: list[np.ndarray] = []
-    points: list[np.ndarray] = []
-    for step in plan.steps:  # Step.force on the press step's knots, as concatenate orders them
-        traj = plan.trajectories[step.name]
-        skip = 1 if forces else 0
-        force = step.force if step.kind == "press" and step.force is not None else (0.0, 0.0, 0.0)
-        forces.append(np.tile(force, (len(traj.times) - skip, 1)))
-        points.append(traj.hand_paths[step.side][skip:])
-    external = fall.ExternalForce(np.concatenate(forces), np.concatenate(points))
-    risk = world.scenario.risk
-    pressed = fall.assess_fall(world, whole, risk, world.scenario.uncertainty, external=external)
+    external = press_forces(plan)
+    assert external is not None
+    risk, uncertainty = world.scenario.risk, world.scenario.uncertainty
+    pressed = assess_fall(
+        world, concatenate(plan.ordered_trajectories(), plan.name), risk, uncertainty, external
+    )
     # ZMP with the panel pushing the hand up by F at p: zmp - c = F (c - p) / (m g - F) (Kajita 2014, 3.2).
     press = plan.trajectories["right.press"]
     weight = world.robot_mass * -world.model.opt.gravity[2]
     lever = np.linalg.norm(press.com_path[:, :2] - press.hand_paths["right"][:, :2], axis=1)
-    assert pressed.details["max_zmp_shift"] == pytest.approx(15.0 * lever.max() / (weight - 15.0), rel=0.02)
+    shift = 15.0 * lever.max() / (weight - 15.0)
+    assert pressed.details["max_zmp_shift"] == pytest.approx(shift, rel=0.02)
+    assert pressed.details["max_external_force"] == pytest.approx(15.0)
+    # The assessment gives the fall model the press's force; at 100 N the press's knots hold the
+    # plan's least margin, which shrinks by at most the 100 N shift.
+    (alternative,) = assess_task(world, task)
+    assert alternative.risk is not None
+    assert alternative.risk.components["fall"].details["max_zmp_shift"] == pytest.approx(shift, rel=0.02)
+    assert isinstance(task, PressTask)
+    strong = dataclasses.replace(task, force=100.0, tolerance=10.0)
+    (hard,) = assess_task(world, strong)
+    assert hard.risk is not None and hard.plan is not None
+    whole = concatenate(hard.plan.ordered_trajectories(), hard.plan.name)
+    plain = float(assess_fall(world, whole, risk, uncertainty).details["min_margin"])
+    margin = float(hard.risk.components["fall"].details["min_margin"])
+    bound = 100.0 * lever.max() / (weight - 100.0) + 0.005  # the plan's own press pose differs by mm
+    assert 0.01 < plain - margin <= bound, (plain, margin, bound)
 
 
 def test_the_g1_presses_with_its_dex3_hand(g1_mjcf: Path) -> None:

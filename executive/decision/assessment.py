@@ -46,6 +46,7 @@ from executive.risk.grasp import (
     hand_pose_at,
 )
 from executive.risk.hold import assess_hold
+from executive.risk.press import press_forces
 from executive.risk.push import assess_placement, plan_forces
 from executive.risk.report import RiskReport
 from executive.tasks.base import Task
@@ -118,7 +119,8 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
     ordered = plan.ordered_trajectories()
     whole = concatenate(ordered, plan.name)
     pushes = plan_forces(world, plan, scenario.uncertainty)  # the reaction of a push moves the ZMP
-    fall = assess_fall(world, whole, scenario.risk, scenario.uncertainty, pushes)
+    external = pushes if pushes is not None else press_forces(plan)  # or a press's
+    fall = assess_fall(world, whole, scenario.risk, scenario.uncertainty, external)
     collision = _collision(collision_model, plan)
     grasp_step = next((s for s in plan.steps if s.kind == "grasp"), None)
     if pushes is not None and grasp_step is None:  # a push holds nothing: its drop mode is falling short
