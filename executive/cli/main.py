@@ -367,45 +367,58 @@ _JOBS = _whole_number(1, 1024, "worker processes")
 _TASK = _whole_number(0, 10_000, "a task index, 0 for the first")
 
 
+_SCENARIO_HELP = "a scenario file path, or the name of a bundled scenario (see `executive list`)"
+_ROLLOUTS_HELP = (
+    "physics rollouts per alternative on truths sampled from the uncertainty (overrides the "
+    "scenario's risk.rollouts.count; 0: off, the dry runs still run)"
+)
+
+
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="executive",
         description="Risk-gated behaviour-tree executive for humanoid robots.",
     )
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    scenario_help = "a scenario file path, or the name of a bundled scenario (see `executive list`)"
-    rollouts_help = (
-        "physics rollouts per alternative on truths sampled from the uncertainty (overrides the "
-        "scenario's risk.rollouts.count; 0: off, the dry runs still run)"
-    )
+    _add_inspection(sub)
+    _add_run(sub)
+    _add_campaign(sub)
+    _add_fidelity(sub)
+    return parser
 
+
+def _add_inspection(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The commands that look without executing: list, validate, show, plan."""
     p = sub.add_parser("list", help="name the bundled scenarios and robots")
     p.set_defaults(func=_cmd_list)
 
     p = sub.add_parser("validate", help="load a scenario, build its world, print a summary")
-    p.add_argument("scenario", help=scenario_help)
+    p.add_argument("scenario", help=_SCENARIO_HELP)
     p.set_defaults(func=_cmd_validate)
 
     p = sub.add_parser("show", help="render the scenario's scene to a PNG (offscreen)")
-    p.add_argument("scenario", help=scenario_help)
+    p.add_argument("scenario", help=_SCENARIO_HELP)
     p.add_argument("--png", required=True, help="output PNG file")
     p.add_argument("--width", type=_PIXELS, default=960, help="picture width in pixels (default 960)")
     p.add_argument("--height", type=_PIXELS, default=720, help="picture height in pixels (default 720)")
     p.set_defaults(func=_cmd_show)
 
     p = sub.add_parser("plan", help="plan every alternative and print its predicted risk (no execution)")
-    p.add_argument("scenario", help=scenario_help)
+    p.add_argument("scenario", help=_SCENARIO_HELP)
     p.add_argument("--json", action="store_true", help="print the table as JSON for machines")
     p.add_argument("--plot", metavar="DIR", help="write CoM/support-polygon and distance plots to DIR")
-    p.add_argument("--rollouts", type=_ROLLOUTS, metavar="N", help=rollouts_help)
+    p.add_argument("--rollouts", type=_ROLLOUTS, metavar="N", help=_ROLLOUTS_HELP)
     p.set_defaults(func=_cmd_plan)
 
+
+def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The run command."""
     p = sub.add_parser(
         "run",
         help="run the mission: plan every alternative, gate on risk, execute the lowest-risk one in physics",
     )
-    p.add_argument("scenario", help=scenario_help)
-    p.add_argument("--rollouts", type=_ROLLOUTS, metavar="N", help=rollouts_help)
+    p.add_argument("scenario", help=_SCENARIO_HELP)
+    p.add_argument("--rollouts", type=_ROLLOUTS, metavar="N", help=_ROLLOUTS_HELP)
     p.add_argument(
         "--alternative",
         help="execute this alternative of task 0 only (left, right, left_to_right, ...): "
@@ -427,12 +440,15 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-guard", action="store_true", help="run without the live risk guards")
     p.set_defaults(func=_cmd_run)
 
+
+def _add_campaign(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The campaign command."""
     p = sub.add_parser(
         "campaign",
         help="Monte Carlo validation: N sampled truths per alternative executed in physics, "
         "predicted risk vs observed failures",
     )
-    p.add_argument("scenario", help=scenario_help)
+    p.add_argument("scenario", help=_SCENARIO_HELP)
     p.add_argument(
         "--trials", type=_TRIALS, default=None, help="trials per alternative (default: trials.count)"
     )
@@ -450,12 +466,15 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--alternatives", help="comma-separated subset of the task's alternatives (default: all)")
     p.set_defaults(func=_cmd_campaign)
 
+
+def _add_fidelity(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The fidelity command."""
     p = sub.add_parser(
         "fidelity",
         help="variation suite: K seeded variants of the scene, a campaign on each; does the risk "
         "ranking hold (predicted vs observed, regret of the per-trial choice)?",
     )
-    p.add_argument("scenario", help=scenario_help)
+    p.add_argument("scenario", help=_SCENARIO_HELP)
     p.add_argument("--variants", type=int, default=10, help="number of scene variants K (default 10)")
     p.add_argument("--trials", type=int, default=10, help="trials per alternative and variant (default 10)")
     p.add_argument("--jobs", type=_JOBS, default=1, help="parallel worker processes per campaign (default 1)")
@@ -466,7 +485,6 @@ def _parser() -> argparse.ArgumentParser:
     )
     p.add_argument("--resume", action="store_true", help="complete the suite in --out DIR")
     p.set_defaults(func=_cmd_fidelity)
-    return parser
 
 
 def main(argv: Sequence[str] | None = None) -> int:
