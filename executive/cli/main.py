@@ -145,7 +145,7 @@ def _run_mission(scenario: Scenario, args: argparse.Namespace) -> int:
     folder = Path(args.out) if args.out else run_folder(scenario.name)
     truth: str | int | None = "exact" if args.exact else args.seed
     executive = Executive(scenario, approval=args.approve, truth=truth, out=folder, guard=not args.no_guard)
-    freeze_startup_heap()  # no 27-57 ms full garbage collection in the middle of a motion
+    freeze_startup_heap()  # no full garbage collection pause in the middle of a motion (its doc)
     display = MissionDisplay(executive, sys.stdout)
     recorder = viewer = None
     try:
