@@ -253,10 +253,15 @@ def test_an_object_in_two_hands_is_held_by_the_hand_that_grasped_it_first() -> N
 # --- a held object ------------------------------------------------------------------------------
 
 
-def test_a_held_object_is_known_held_and_moves_with_the_hand(two_tasks: Path) -> None:
+@pytest.mark.parametrize("sigma", [0.0, 0.01])
+def test_a_held_object_is_known_held_and_moves_with_the_hand(two_tasks: Path, sigma: float) -> None:
+    """The grip is measured by one look at the grasp; the estimate then follows the hand alone.
+
+    Its error against the truth stays what that look's error was (0 with an exact sensor)
+    within a few mm (the object's slip in the hand) over the whole carry."""
     scenario = load(str(two_tasks))
-    exact = dataclasses.replace(scenario.uncertainty, object_position=0.0, object_yaw_rad=0.0)
-    scenario = dataclasses.replace(scenario, uncertainty=exact)
+    seeing = dataclasses.replace(scenario.uncertainty, object_position=sigma, object_yaw_rad=0.0)
+    scenario = dataclasses.replace(scenario, uncertainty=seeing)
     truth, estimate, planning = (
         build(scenario, Perturbation(), kind="truth"),
         build(scenario),
@@ -284,12 +289,15 @@ def test_a_held_object_is_known_held_and_moves_with_the_hand(two_tasks: Path) ->
         elif grasped and holding.get("left") == "box_a":  # nothing seen: the hand carries it
             nothing = Observation({}, confirmed_holding(robot, holding), {"source": "none"}, robot.time)
             update_estimate(estimate, robot.data.qpos, nothing)
-            errors.append(np.linalg.norm(estimate.object_pose("box_a")[0] - truth.object_pose("box_a")[0]))
+            errors.append(estimate.object_pose("box_a")[0] - truth.object_pose("box_a")[0])
             hand.append(truth.data.site_xpos[site].copy())
     assert root.status == py_trees.common.Status.SUCCESS
     travel = max(np.linalg.norm(h - hand[0]) for h in hand)
     assert travel > 0.2  # a real motion: lift, carry, put down
-    assert max(errors) < 0.005, max(errors)
+    first = errors[0]
+    assert np.linalg.norm(first[:2]) < 3 * sigma + 0.003  # the look's error (3 sigma) and slip
+    drift = max(np.linalg.norm(e - first) for e in errors)
+    assert drift < 0.003, drift  # follows the hand: the error does not grow over the motion
     assert object_contacts(robot, "left", "box_a")[0] == 0  # released ...
     look = refresh(estimate, robot, dict(bb.holding), "after_task")  # ... and known so:
     assert estimate.held_by("box_a") is None and estimate.held == {} and estimate.grips == {}
