@@ -200,7 +200,7 @@ def _run_one(scenario: Scenario, args: argparse.Namespace) -> int:
             f"its alternatives are: {', '.join(task.alternatives)}"
         )
     truth = "exact (truth = estimate)" if args.exact else f"sampled truth, seed {args.seed}"
-    print(f"run {scenario.name}: transfer {task.object}, alternative {args.alternative}, {truth}")
+    print(f"run {scenario.name}: {task.label()}, alternative {args.alternative}, {truth}")
     result = run_alternative(scenario, args.alternative, exact=args.exact, seed=args.seed)
     print(f"outcome   {result.outcome}: {result.message}")
     if result.outcome != "planning_failed":
@@ -229,7 +229,7 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     physics.pool.warm()  # the workers start while the planner works
     try:
         for i, task in enumerate(scenario.mission):
-            label = f"{i}: transfer {task.object}"
+            label = f"{i}: {task.label()}"
             analytic = assess_task(world, task)
             if not args.json:  # the analytic answer at once, the physics check's after it
                 print(risk_table(scenario, f"{label}, analytic", analytic))

@@ -198,7 +198,7 @@ class PlaceKind(TaskKind):
         assert isinstance(task, PlaceTask)
         holder = holder_of(world, task.object)
         if alternative != holder:
-            by = f"the {holder} hand" if holder else "no hand"
+            by = f"the {holder} hand" if holder else "no hand (a place starts where a pick left it in hand)"
             reason = f"place {alternative}: '{task.object}' is held by {by}"
             raise PlanningError(alternative, None, 0.0, 0.0, 0, reason=reason)
         return place_steps(world, task, alternative, config)

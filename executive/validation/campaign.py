@@ -596,6 +596,7 @@ def _alternative_summary(
     """One alternative's row of the summary: its trials, failures by mode and rates, and its
     mean predicted risk over its executed trials."""
     mine = [r for r in executed if r["alternative"] == name]
+    infeasible = [r for r in records if r["alternative"] == name and r["outcome"] == "infeasible"]
     n = len(mine)
     failures = {m: sum(r["outcome"] == m for r in mine) for m in FAILURE_MODES}
     failures["any"] = sum(r["outcome"] != "success" for r in mine)
@@ -612,7 +613,7 @@ def _alternative_summary(
         "feasible": bool(prediction.feasible) if prediction else None,
         "error": prediction.error
         if prediction and (not prediction.feasible or prediction.value is None)
-        else "",
+        else (infeasible[0]["failure"]["detail"] if infeasible else ""),  # planned per trial: the first's why
         "physics": prediction.physics if prediction else None,
         "trials": n,
         "errors": sum(r["outcome"] == "error" for r in records if r["alternative"] == name),
