@@ -106,6 +106,16 @@ def test_place_supports_only_the_hand_that_holds_the_object() -> None:
     assert picks["left"] == "'book' is held by the right hand already"
 
 
+def test_a_pick_with_nothing_in_hand_is_reported_as_a_drop() -> None:
+    from executive.monitoring.detectors import FailureDetector
+
+    world = build(load("pick_place_push"))  # the book on the table, no hand near it
+    verdict = PickKind().verify(load("pick_place_push").mission[0], world, FailureDetector(world))
+    assert verdict is not None and not verdict.ok
+    assert verdict.fields["mode"] == "drop" and "no hand holds book" in verdict.fields["detail"]
+    assert verdict.failure is not None and verdict.failure.mode == "drop"
+
+
 def test_bundled_scenario_validates() -> None:
     out = subprocess.run(
         [*CMD, "validate", "pick_place_push"], capture_output=True, text=True, env=ENV, timeout=120
@@ -146,7 +156,10 @@ def test_pick_then_place_in_physics_puts_the_book_at_its_target(tmp_path: Path) 
             ex.tick()
         held_at = truth.data.xpos[book].copy()
         summary = ex.run(time_limit_s=120.0, on_tick=watch)
+        held = ex.log.of_kind("held")
     assert summary["outcome"] == "success", summary
+    assert [h["side"] for h in held] == [summary["tasks"][0]["chosen"]]
+    assert held[0]["contacts"] >= 2 and held[0]["force_n"] >= 10.0
     assert [t["outcome"] for t in summary["tasks"]] == ["success", "success"]
     assert summary["tasks"][1]["chosen"] == summary["tasks"][0]["chosen"]
     assert held_at[2] > 0.8 + 0.05  # held above the table top after the pick

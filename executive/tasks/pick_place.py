@@ -157,10 +157,13 @@ def held_verdict(detector: object, obj: str) -> Verdict | None:
         found[side] = (n, force)
         if n >= MIN_CONTACTS and force >= MIN_FORCE:
             return Verdict(True, "held", {"object": obj, "side": side, "contacts": n, "force_n": force})
+    from executive.monitoring.detectors import Failure
+
     touch = ", ".join(f"{s} {n} geoms {f:.1f} N" for s, (n, f) in found.items())
     detail = f"drop: no hand holds {obj} ({touch}; need {MIN_CONTACTS} geoms and {MIN_FORCE:.0f} N)"
-    fields = {"mode": "drop", "detail": detail, "behaviour": "hold", "time": None}
-    return Verdict(False, "failure", fields)
+    t = float(world.data.time) if world is not None else float(getattr(detector, "time", 0.0))
+    fields = {"mode": "drop", "detail": detail, "behaviour": "hold", "time": t}
+    return Verdict(False, "failure", fields, Failure("drop", detail, t, (obj,)))
 
 
 class PlaceKind(TaskKind):
