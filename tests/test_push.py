@@ -22,6 +22,7 @@ from executive.planning.planner import Planner, PlanningError
 from executive.planning.timing import Trajectory
 from executive.risk.fall import ExternalForce, assess_fall, zero_moment_points
 from executive.risk.gaussian import normal_cdf
+from executive.risk.push import yielding
 from executive.risk.rollouts import RolloutJob, estimate_scenario, rollout_seed, run_job
 from executive.robot.simulated import SimulatedRobot
 from executive.runtime.runner import execute_plan
@@ -97,11 +98,19 @@ def test_a_light_push_slides_the_book_to_its_target(tmp_path: Path) -> None:
     assert left.risk is not None and left.plan is not None
     fall, drop = left.risk.components["fall"], left.risk.components["grasp"]
     assert fall.details["max_external_force"] == pytest.approx(1.0 * 0.6 * 9.81, rel=1e-6)  # mu m g
-    # The ZMP moves back by F h / (m g), h the hand's height over the floor (Kajita et al.): 4 mm.
+    # The ZMP moves back by F h / (m g), h the hand's height over the floor (Kajita et al.), 4 mm,
+    # and the CoM with it as the servos give (0.1 mm/N): 4.5 mm.
     world = build(scenario)
-    heights = [left.plan.trajectories[s.name].hand_paths["left"][:, 2] for s in left.plan.steps if s.force]
+    pushes = [left.plan.trajectories[s.name] for s in left.plan.steps if s.force]
+    heights = np.concatenate([t.hand_paths["left"][:, 2] for t in pushes])
     weight = float(world.model.body_subtreemass[world.ids.base_body]) * 9.81
-    assert fall.details["max_zmp_shift"] == pytest.approx(5.886 * np.max(np.concatenate(heights)) / weight)
+    give = max(
+        float(np.linalg.norm(yielding(world, "left", q, np.array([1.0, 0, 0]))[1]))
+        for t in pushes
+        for q in (t.qpos[0], t.qpos[-1])
+    )
+    expected = 5.886 * float(np.max(heights)) / weight + 5.886 * give
+    assert fall.details["max_zmp_shift"] == pytest.approx(expected, rel=0.03)
     assert fall.probability < 1e-6 and drop.details["stall_probability"] == 0.0
     push = next(s for s in left.plan.steps if s.name == "left.push")
     assert push.kind == "push" and push.carried == ("left", "book")
@@ -233,13 +242,14 @@ def test_the_zmp_moves_as_the_feet_feel_it(tmp_path: Path, force: tuple[float, f
     assert float(np.linalg.norm(error)) < 0.1 * float(np.linalg.norm(shift))
 
 
-@pytest.mark.parametrize(("push", "falls"), [(100.0, False), (180.0, True)])
+@pytest.mark.parametrize(("push", "falls"), [(120.0, False), (150.0, True)])
 def test_a_hand_force_beyond_the_tipping_force_topples_the_robot(
     tmp_path: Path, push: float, falls: bool
 ) -> None:
     """No arm of this humanoid can push that hard, so the force is applied directly: the reaction of
-    a forward push at the palm of the standing robot. The fall model predicts < 1 % at 100 N (the ZMP
-    3 cm inside the heels) and > 90 % at 180 N (2 cm beyond them); physics stands, and falls."""
+    a forward push at the palm of the standing robot, ramped on over 1 s. With the CoM's give under
+    it (0.1 mm/N), the fall model tips it at 141 N: 3 % at 120 N, 80 % at 150 N; physics stands at
+    120 N and falls at 150 N (it tips between 120 and 140 N: docs/measurements.md)."""
     scenario = load(write(tmp_path, scenario_text()))
     world = build(scenario)
     m, d = world.model, world.data
@@ -248,14 +258,17 @@ def test_a_hand_force_beyond_the_tipping_force_topples_the_robot(
     home = world.home_qpos()
     com = np.tile(d.subtree_com[base], (2, 1))
     still = Trajectory("still", np.array([0.0, 1.0]), np.tile(home, (2, 1)), {}, com, None)
-    force = ExternalForce(np.tile([push, 0.0, 0.0], (2, 1)), np.tile(d.xipos[palm], (2, 1)))
+    give = yielding(world, "left", home, np.array([1.0, 0.0, 0.0]))[1]
+    force = ExternalForce(
+        np.tile([push, 0.0, 0.0], (2, 1)), np.tile(d.xipos[palm], (2, 1)), com_yield=np.tile(give, (2, 1))
+    )
     predicted = assess_fall(world, still, scenario.risk, scenario.uncertainty, force).probability
     robot = SimulatedRobot(world, control_dt=0.02, detector=FailureDetector(world))
     robot.hold()
-    d.xfrc_applied[palm, :3] = (-push, 0.0, 0.0)
-    for _ in range(150):
+    for k in range(150):
+        d.xfrc_applied[palm, :3] = (-push * min(1.0, k / 50), 0.0, 0.0)
         if robot.advance() is not None:
             break
     failure = robot.failure
     assert (failure is not None and failure.mode == "fall") == falls, failure
-    assert predicted > 0.9 if falls else predicted < 0.01
+    assert predicted > 0.5 if falls else predicted < 0.1

@@ -492,9 +492,11 @@ class ExternalForce:
     zero rows where it applies none); ``point``: (K, 3) m, where it acts (the hand site).
     ``mass_sigma``, ``friction_sigma``: relative 1-sigma errors of the object's mass and friction;
     the force scales with their product (Coulomb: ``mu m g``), each factor floored at
-    :data:`SCALE_FLOOR` as the truth sampler draws them. ``limit``: the largest force (N) the arm
-    can exert (:func:`executive.risk.push.arm_force_capacity`); a push that needs more stalls,
-    and the robot feels no more than that.
+    :data:`SCALE_FLOOR` as the truth sampler draws them. ``limit``: the largest force (N) the
+    robot feels (a push that needs more stalls, :class:`executive.risk.push.PushLimits`);
+    ``limit_low``: when given, the force at which it stalls is uniform in ``[limit_low, limit]``
+    (how far the hand lags when its move gives up). ``com_yield``: (K, 3) m per newton, how far
+    the CoM gives way under the force (the servos yield, :func:`executive.risk.push.yielding`).
     """
 
     force: FloatArray
@@ -502,6 +504,8 @@ class ExternalForce:
     mass_sigma: float = 0.0
     friction_sigma: float = 0.0
     limit: float = float("inf")
+    limit_low: float | None = None
+    com_yield: FloatArray | None = None
 
 
 #: The truth sampler's floor on its mass and friction factors (executive.world.model.sample_perturbation).
@@ -657,29 +661,48 @@ def _under_force(
 ) -> tuple[tuple[float, float, float], dict[str, float]]:
     """The support probability (and bounds) over the force's scale, and the force's numbers.
 
-    Without a force: the CoM's. With one: the ZMP's at each scale of the force (it grows with the
-    object's mass and friction factors), P(fall | scale) on a grid between the extreme scales,
-    interpolated at the scale distribution's nodes and averaged with their weights.
+    Without a force: the CoM's. With one: the ZMP's with the force the robot feels, the push's
+    (scaled by the object's mass and friction factors) up to the force at which it stalls
+    (:func:`_felt_scales`); P(fall | felt scale) on a grid between the extreme scales,
+    interpolated at the nodes and averaged with their weights.
     """
     if external is None or not np.any(external.force):
         return _support_probability(knots.polygons, knots.coms[:, :2], cov), {}
-    nodes, weights = force_scale_distribution(external.mass_sigma, external.friction_sigma)
-    grid = np.linspace(float(np.min(nodes)), float(np.max(nodes)), _SCALE_GRID if len(nodes) > 1 else 1)
+    scales, weights = _felt_scales(external)
+    low, high = float(np.min(scales)), float(np.max(scales))
+    grid = np.linspace(low, high, _SCALE_GRID) if high > low else np.array([low])
     values = np.array(
         [_support_probability(knots.polygons, _zmps(knots, external, float(scale)), cov) for scale in grid]
     )
-    expected = tuple(float(np.sum(weights * np.interp(nodes, grid, values[:, j]))) for j in range(3))
-    magnitude = np.linalg.norm(external.force, axis=1)
-    shift = np.linalg.norm(_zmps(knots, external, 1.0) - knots.coms[:, :2], axis=1)
+    expected = tuple(float(np.sum(weights * np.interp(scales, grid, values[:, j]))) for j in range(3))
+    peak = float(np.max(np.linalg.norm(external.force, axis=1)))
+    most = min(1.0, external.limit / peak)
+    shift = np.linalg.norm(_zmps(knots, external, most) - knots.coms[:, :2], axis=1)
     facts = {
-        "max_external_force": float(np.max(magnitude)),
+        "max_external_force": peak,
         "max_zmp_shift": float(np.max(shift)),
-        "force_scale_sigma": float(np.sqrt(np.sum(weights * nodes**2) - np.sum(weights * nodes) ** 2)),
-        "probability_support_nominal_force": float(values[int(np.argmin(np.abs(grid - 1.0))), 0]),
+        "felt_force_mean": float(np.sum(weights * scales) * peak),
+        "probability_support_most_felt": float(np.interp(most, grid, values[:, 0])),
         "arm_force_limit": float(external.limit),
         "force_to_tip": _tipping_force(knots, external),
     }
     return (expected[0], expected[1], expected[2]), facts
+
+
+def _felt_scales(external: ExternalForce) -> tuple[FloatArray, FloatArray]:
+    """Nodes and weights of the felt force's scale: ``min(s, stall / F)``.
+
+    ``s``: the push's scale (:func:`force_scale_distribution`); ``stall``: ``limit``, or uniform in
+    ``[limit_low, limit]`` (16 equal bins' midpoints); ``F``: the push's largest force.
+    """
+    nodes, weights = force_scale_distribution(external.mass_sigma, external.friction_sigma)
+    peak = float(np.max(np.linalg.norm(external.force, axis=1)))
+    if external.limit_low is None or external.limit_low >= external.limit:
+        stalls = np.array([external.limit])
+    else:
+        stalls = external.limit_low + (np.arange(16) + 0.5) / 16 * (external.limit - external.limit_low)
+    scales = np.minimum(nodes[:, None], stalls[None, :] / peak).ravel()
+    return scales, (weights[:, None] * np.full(len(stalls), 1.0 / len(stalls))[None, :]).ravel()
 
 
 def _tipping_force(knots: _Knots, external: ExternalForce) -> float:
@@ -688,10 +711,9 @@ def _tipping_force(knots: _Knots, external: ExternalForce) -> float:
     Bisection on the force's scale (the margin falls as the push grows); inf when even 1000
     times the push leaves the ZMP inside.
     """
-    uncapped = ExternalForce(external.force, external.point)
 
     def margin(scale: float) -> float:
-        mus = _zmps(knots, uncapped, scale)
+        mus = _zmps(knots, external, scale)
         return min(
             float(np.min(signed_margin_batch(verts, mus[idx])))
             for idx, verts in knots.polygons.groups.values()
@@ -709,14 +731,12 @@ def _tipping_force(knots: _Knots, external: ExternalForce) -> float:
 
 
 def _zmps(knots: _Knots, external: ExternalForce, scale: float) -> FloatArray:
-    """The ZMPs with the force scaled by ``scale``, each knot's capped at the arm's ``limit``."""
+    """The ZMPs with the force scaled by ``scale`` (no cap), the CoM given way by ``com_yield``."""
     force = scale * external.force
-    magnitude = np.linalg.norm(force, axis=1)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        cap = np.where(magnitude > external.limit, external.limit / magnitude, 1.0)
-    return zero_moment_points(
-        knots.coms, force * cap[:, None], external.point, knots.mass, knots.gravity, knots.ground
-    )
+    coms = knots.coms
+    if external.com_yield is not None:
+        coms = coms + external.com_yield * np.linalg.norm(force, axis=1)[:, None]
+    return zero_moment_points(coms, force, external.point, knots.mass, knots.gravity, knots.ground)
 
 
 def _with_posture(p: float, posture: dict[str, float]) -> float:
@@ -762,7 +782,10 @@ def assess_fall(
     cov = _covariance(_com_covariance(uncertainty))
     knots = _knots(world, trajectory)
     xi = _capture_points(knots)
-    mus = knots.coms[:, :2] if external is None else _zmps(knots, external, 1.0)
+    mus = knots.coms[:, :2]
+    if external is not None and np.any(external.force):  # the traces at the mean felt force
+        scales, weights = _felt_scales(external)
+        mus = _zmps(knots, external, float(np.sum(weights * scales)))
     per = _per_knot(knots.polygons, mus, xi, cov)
     (probability, lower, upper), force_facts = _under_force(knots, external, cov)
     posture = _posture_probability(world, knots.pelvis, knots.upright, float(uncertainty.com))

@@ -48,6 +48,7 @@ __all__ = [
     "hand_compliance",
     "plan_forces",
     "push_limits",
+    "yielding",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -106,13 +107,19 @@ def arm_force_capacity(world: World, side: str, qpos: FloatArray, direction: Flo
 
 
 def hand_compliance(world: World, side: str, qpos: FloatArray, direction: FloatArray) -> float:
-    """m/N: how far ``side``'s hand yields along the unit ``direction`` per newton it pushes there.
+    """m/N: how far ``side``'s hand yields along the unit ``direction`` per newton it pushes there
+    (:func:`yielding`'s first value)."""
+    return yielding(world, side, qpos, direction)[0]
+
+
+def yielding(world: World, side: str, qpos: FloatArray, direction: FloatArray) -> tuple[float, FloatArray]:
+    """How the standing robot gives way per newton its ``side`` hand pushes along ``direction``.
 
     The robot stands on both feet (held fixed) and holds its pose with position servos of stiffness
     ``kp`` (``actuator_gainprm``, times the gear squared): the quasi-static deflection ``dq`` under
-    the hand force ``f u`` minimises ``dq^T K dq / 2 - f u^T J_h dq`` subject to ``J_feet dq = 0``
-    (the KKT system over the robot's dofs; the floating base has no stiffness of its own, the
-    legs carry it). The compliance is ``u^T J_h dq / f``.
+    the reaction ``-f u`` at the hand minimises ``dq^T K dq / 2 + f u^T J_h dq`` subject to
+    ``J_feet dq = 0`` (the KKT system over the robot's dofs; the floating base has no stiffness of
+    its own, the legs carry it).
 
     Args:
         world: the world whose model ``qpos`` indexes.
@@ -121,7 +128,8 @@ def hand_compliance(world: World, side: str, qpos: FloatArray, direction: FloatA
         direction: unit vector (world) of the force the hand exerts.
 
     Returns:
-        m/N along ``direction``.
+        The hand's compliance along ``direction`` (m/N, ``-u^T J_h dq / f``) and the CoM's
+        displacement per newton (3,) (m/N, ``J_com dq / f``: against the push).
     """
     model = world.model
     data = mujoco.MjData(model)
@@ -150,9 +158,12 @@ def hand_compliance(world: World, side: str, qpos: FloatArray, direction: FloatA
     kkt = np.zeros((n + c, n + c))
     kkt[:n, :n] = np.diag(stiffness[dofs])
     kkt[:n, n:], kkt[n:, :n] = constraint.T, constraint
-    rhs = np.concatenate([hand[:, dofs].T @ np.asarray(direction, dtype=float), np.zeros(c)])
+    u = np.asarray(direction, dtype=float)
+    rhs = np.concatenate([hand[:, dofs].T @ -u, np.zeros(c)])
     dq = np.linalg.lstsq(kkt, rhs, rcond=None)[0][:n]
-    return float(np.asarray(direction, dtype=float) @ hand[:, dofs] @ dq)
+    com = np.zeros((3, model.nv))
+    mujoco.mj_jacSubtreeCom(model, data, com, world.ids.base_body)
+    return float(-u @ hand[:, dofs] @ dq), np.asarray(com[:, dofs] @ dq, dtype=float)
 
 
 @dataclass(frozen=True)
@@ -167,6 +178,7 @@ class PushLimits:
     saturation: float
     compliance: float
     leg: float
+    com_yield: FloatArray  # (3,) m/N: the CoM's give (:func:`yielding`), the largest of the knots'
 
     @property
     def placed(self) -> float:
@@ -178,10 +190,18 @@ class PushLimits:
         """N the robot can feel at most: the hand lags at most a leg plus the move's tolerance."""
         return min(self.saturation, (HAND_TOLERANCE + self.leg) / self.compliance)
 
+    @property
+    def felt_low(self) -> float:
+        """N of the least force a stalled push ends at: the move gives up past its tolerance.
+
+        A stall's force is taken uniform between this and :attr:`felt` (where in its last leg the
+        hand's lag passes the tolerance)."""
+        return min(self.saturation, HAND_TOLERANCE / self.compliance)
+
 
 def push_limits(world: World, plan: AlternativePlan) -> PushLimits | None:
     """The :class:`PushLimits` of ``plan``'s push steps (None: it pushes nothing)."""
-    saturation, compliance, leg = np.inf, 0.0, 0.0
+    saturation, compliance, leg, com_yield = np.inf, 0.0, 0.0, np.zeros(3)
     for step in plan.steps:
         traj = plan.trajectories.get(step.name)
         if traj is None or step.kind != "push" or step.force is None or not np.any(step.force):
@@ -191,8 +211,10 @@ def push_limits(world: World, plan: AlternativePlan) -> PushLimits | None:
         leg = max(leg, float(np.linalg.norm(path[-1] - path[0])))
         for q in (traj.qpos[0], traj.qpos[-1]):
             saturation = min(saturation, arm_force_capacity(world, step.side, q, u))
-            compliance = max(compliance, hand_compliance(world, step.side, q, u))
-    return PushLimits(saturation, compliance, leg) if compliance > 0.0 else None
+            give, com = yielding(world, step.side, q, u)
+            compliance = max(compliance, give)
+            com_yield = com if np.linalg.norm(com) > np.linalg.norm(com_yield) else com_yield
+    return PushLimits(saturation, compliance, leg, com_yield) if compliance > 0.0 else None
 
 
 def plan_forces(world: World, plan: AlternativePlan, uncertainty: Uncertainty) -> ExternalForce | None:
@@ -206,6 +228,7 @@ def plan_forces(world: World, plan: AlternativePlan, uncertainty: Uncertainty) -
         return None
     forces: list[FloatArray] = []
     points: list[FloatArray] = []
+    yields: list[FloatArray] = []
     for step in plan.steps:
         traj = plan.trajectories.get(step.name)
         if traj is None:
@@ -215,6 +238,7 @@ def plan_forces(world: World, plan: AlternativePlan, uncertainty: Uncertainty) -
         pushing = step.kind == "push" and step.force is not None
         force = np.asarray(step.force if pushing else (0.0, 0.0, 0.0), dtype=float)
         forces.append(np.tile(force, (count, 1)))
+        yields.append(np.tile(limits.com_yield if pushing else np.zeros(3), (count, 1)))
         points.append(np.asarray(traj.hand_paths[step.side], dtype=float)[skip:])
     return ExternalForce(
         np.concatenate(forces),
@@ -222,6 +246,8 @@ def plan_forces(world: World, plan: AlternativePlan, uncertainty: Uncertainty) -
         mass_sigma=uncertainty.object_mass,
         friction_sigma=uncertainty.friction,
         limit=limits.felt,
+        limit_low=limits.felt_low,
+        com_yield=np.concatenate(yields),
     )
 
 
