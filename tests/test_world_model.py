@@ -21,7 +21,9 @@ import pytest
 
 from behaviours.gripper import object_contacts
 from behaviours.robot_access import NAMESPACE, install
+from executive.decision.approval import ApprovalDecision, ApprovalRequest, CallbackChannel
 from executive.decision.assessment import assess_task
+from executive.decision.audit import now_iso
 from executive.planning.planner import Planner
 from executive.risk.rollouts import with_rollouts
 from executive.robot.interface import HostRobot, JointState
@@ -173,6 +175,27 @@ def test_task_two_is_planned_where_task_one_left_its_object(two_tasks: Path, tru
     summary = executive.summary()
     assert summary["outcome"] == "success", summary["tasks"]
     assert summary["placement"][1]["error_m"] < 0.03
+
+
+def test_a_replan_the_operator_asks_for_looks_first(tmp_path: Path) -> None:
+    path = tmp_path / "ask.yaml"
+    path.write_text(TWO_TASKS.replace("threshold: 0.3", "threshold: 0.0"))  # every choice is asked
+    answers = iter(["replan", "abort"])
+
+    def operator(request: ApprovalRequest) -> ApprovalDecision:
+        return ApprovalDecision(next(answers), None, by="operator:test", at=now_iso())  # type: ignore[arg-type]
+
+    executive = Executive(path, truth=1, approval=CallbackChannel(operator))
+    truth_at = _run(executive)
+    kinds = [(e["kind"], e.get("reason") or e.get("decision")) for e in executive.log.entries]
+    at = kinds.index(("approval", "replan"))
+    assert kinds[at + 1] == ("observation", "before_replan") and kinds[at + 2][0] == "planning"
+    look = executive.log.entries[at + 1]
+    assert look["source"]["source"] == "simulated" and look["holding"] == {}
+    for seen in look["objects"]:
+        assert np.linalg.norm(np.array(seen["position"][:2]) - truth_at[look["seq"]][seen["name"]][:2]) < 0.03
+    assert executive.outcome == "aborted"
+    assert [e["reason"] for e in executive.log.of_kind("observation")] == ["before_replan"]  # nothing moved
 
 
 # --- the sensor's noise -------------------------------------------------------------------------

@@ -44,6 +44,7 @@ __all__ = [
     "GRASP_CONTACTS",
     "GRASP_FORCE",
     "OBSERVATION_STREAM",
+    "REASONS",
     "Observation",
     "SimulatedSensor",
     "confirmed_holding",
@@ -62,6 +63,9 @@ GRASP_CONTACTS, GRASP_FORCE = 2, 10.0
 #: The simulated sensor's generator is ``default_rng([seed, OBSERVATION_STREAM])``: the run's
 #: truth seed, but a stream independent of the truth's own draw (``default_rng(seed)``).
 OBSERVATION_STREAM = 1
+#: Why the estimate is updated: after a task ended, after a failure, before a re-plan, and (a
+#: host's robot) at start-up.
+REASONS = ("after_task", "after_failure", "before_replan", "at_start")
 
 
 @dataclass(frozen=True)
@@ -289,11 +293,6 @@ def _compose(pos: FloatArray, quat: FloatArray, rel_pos: FloatArray, rel_quat: F
     mujoco.mju_rotVecQuat(out_pos, rel_pos, quat)
     mujoco.mju_mulQuat(out_quat, quat, rel_quat)
     return pos + out_pos, out_quat / np.linalg.norm(out_quat)
-
-
-#: Why the estimate is updated: after a task ended, after a failure, before a re-plan, and (a
-#: host's robot) at start-up.
-REASONS = ("after_task", "after_failure", "before_replan", "at_start")
 
 
 def refresh(world: World, robot: Any, holding: Mapping[str, str], reason: str) -> dict[str, Any]:
