@@ -28,7 +28,7 @@ from executive.robot.simulated import SimulatedRobot
 from executive.runtime.runner import execute_plan
 from executive.scenario.loader import load
 from executive.scenario.types import Body, Scenario
-from executive.tasks.push import PushTask
+from executive.tasks.push import PushKind, PushTask
 from executive.tasks.steps import plan_alternative
 from executive.validation.stats import clopper_pearson
 from executive.world.model import World, build
@@ -272,3 +272,22 @@ def test_a_hand_force_beyond_the_tipping_force_topples_the_robot(
     failure = robot.failure
     assert (failure is not None and failure.mode == "fall") == falls, failure
     assert predicted > 0.5 if falls else predicted < 0.1
+
+
+def test_a_held_or_round_object_is_not_pushed(tmp_path: Path) -> None:
+    """A push slides what rests on the table: a book in a hand, or a ball, is refused with why."""
+    scenario = load(write(tmp_path, scenario_text(mission=MISSION.replace("[left]", "[left, right]"))))
+    world = build(scenario)
+    kind = PushKind()
+    world.held["book"] = "right"
+    reasons = {a.name: a.unsupported for a in kind.alternatives(scenario.mission[0], world)}
+    assert reasons == {
+        side: "'book' is in the right hand: a push slides an object resting on the table"
+        for side in ("left", "right")
+    }
+    ball = dataclasses.replace(
+        scenario.scene.objects[0], shape="sphere", size=(0.04,), position=(0.5, 0.3, 0.84)
+    )
+    rolling = build(dataclasses.replace(scenario, scene=dataclasses.replace(scenario.scene, objects=(ball,))))
+    (left, right) = kind.alternatives(scenario.mission[0], rolling)
+    assert left.unsupported == right.unsupported == "a sphere rolls: one hand cannot stop it at the target"

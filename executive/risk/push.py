@@ -15,10 +15,12 @@ truth's mass and friction factors (``uncertainty.object_mass``, ``uncertainty.fr
 * Placement (the push's drop mode, :func:`assess_placement`): short by more than the place
   tolerance, or saturated, it fails; otherwise the object's position error across the push
   stays in it (along the push the hand meets it wherever it is).
-* Balance: the robot feels at most what the hand can exert before its move gives up, a lag of a
-  push leg plus the move's tolerance (:attr:`PushLimits.felt`); its reaction moves the
-  zero-moment point (:func:`executive.risk.fall.zero_moment_points`), taken per knot by the fall
-  model (:class:`executive.risk.fall.ExternalForce`, from :func:`plan_forces`).
+* Balance: the robot feels the push's force up to where a stalled push ends, when its move
+  gives up with the hand lagging between the move's tolerance and that plus a push leg
+  (uniform between :attr:`PushLimits.felt_low` and :attr:`PushLimits.felt`); its reaction moves
+  the zero-moment point (:func:`executive.risk.fall.zero_moment_points`) and the CoM gives way
+  with it (:func:`yielding`), per knot in the fall model
+  (:class:`executive.risk.fall.ExternalForce`, from :func:`plan_forces`).
 """
 
 from __future__ import annotations

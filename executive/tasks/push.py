@@ -9,8 +9,8 @@ carries the force the hand must exert: Coulomb sliding friction ``mu m g`` along
 (``mu`` as MuJoCo mixes the object's and the table's frictions,
 :func:`executive.risk.hold.contact_parameters`); the fall risk feels its reaction
 (:func:`executive.risk.fall.assess_fall`). A sphere rolls (it cannot be stopped at a target by
-one hand), and an object pushed above ``half_width / mu`` tips over instead of sliding: both
-are refused with the reason.
+one hand), an object in a hand does not rest on the table, and an object pushed above
+``half_width / mu`` tips over instead of sliding: each is refused with the reason.
 
 A push keeps the object's yaw only roughly (a flat finger face on a flat side turns it a
 little): :meth:`PushKind.verify` checks its position only.
@@ -99,6 +99,9 @@ class PushKind(TaskKind):
     def offered(self, task: Task, world: World) -> list[Alternative]:
         body = _body(world, task.object)
         reason = "a sphere rolls: one hand cannot stop it at the target" if body.shape == "sphere" else ""
+        holder = world.held_by(task.object)
+        if holder is not None:
+            reason = f"'{task.object}' is in the {holder} hand: a push slides an object resting on the table"
         sides = world.profile.sides
         return [
             Alternative(s, reason if s in sides else f"robot '{world.profile.name}' has no {s} arm")
