@@ -37,6 +37,7 @@ from executive.world.model import World
 __all__ = [
     "CONTACT_GAP",
     "GAP_SIGMAS",
+    "PUSH_LEG",
     "TIP_CLEARANCE",
     "PushKind",
     "PushLine",
