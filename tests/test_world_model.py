@@ -21,6 +21,7 @@ import pytest
 
 from behaviours.gripper import object_contacts
 from behaviours.robot_access import NAMESPACE, install
+from executive.cli.progress import observed
 from executive.decision.approval import ApprovalDecision, ApprovalRequest, CallbackChannel
 from executive.decision.assessment import assess_task
 from executive.decision.audit import now_iso
@@ -127,6 +128,11 @@ def test_replan_after_a_failed_handover_starts_from_the_book_in_the_hand() -> No
     truth = truth_at[after["seq"]]["book"]
     start = np.array([0.52, 0.26, 0.825])
     assert book["held_by"] == "left"
+    x, y, z = book["position"]
+    assert observed(after) == (
+        "task0: observed (after failure; simulated, sigma 10 mm 3.0 deg): "
+        f"book at ({x:.3f}, {y:.3f}, {z:.3f}) in the left hand"
+    )  # what `executive run` prints of it
     assert np.linalg.norm(np.array(book["position"]) - truth) < 0.03  # the sensor's 1 cm sigma, 3 sigma
     assert np.linalg.norm(truth - start) > 0.2  # the book is really elsewhere (in the left hand)
     replan = next(e for e in log.of_kind("planning") if e["replan"])

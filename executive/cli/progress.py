@@ -13,6 +13,7 @@ request (the risk table, the selection) and then lets the prompt draw
 
 from __future__ import annotations
 
+import math
 import time
 from typing import IO, Any
 
@@ -20,7 +21,7 @@ from executive.decision.approval import TerminalChannel
 from executive.report.plots import risk_table
 from executive.runtime.mission import Executive
 
-__all__ = ["MissionDisplay", "final_table"]
+__all__ = ["MissionDisplay", "final_table", "observed"]
 
 
 def final_table(summary: dict[str, Any]) -> str:
@@ -113,6 +114,8 @@ class MissionDisplay:
             return f"{e['task']}: {e['outcome']}"
         if kind == "stop":
             return f"stopped: {e['reason']}"
+        if kind == "observation":
+            return observed(e)
         return ""
 
     def update(self) -> None:
@@ -158,3 +161,18 @@ class MissionDisplay:
         )
         if summary.get("folder"):
             self._print(f"run folder {summary['folder']} (decisions.jsonl, summary.json, plots)")
+
+
+def observed(e: dict[str, Any]) -> str:
+    """One line of an ``observation`` log line: why, from what, where each object is and who holds it."""
+    source = e["source"]
+    how = source["source"]
+    if "sigma_position_m" in source:
+        sigma_yaw = math.degrees(source["sigma_yaw_rad"])
+        how += f", sigma {1000 * source['sigma_position_m']:.0f} mm {sigma_yaw:.1f} deg"
+    where = "; ".join(
+        f"{o['name']} at ({o['position'][0]:.3f}, {o['position'][1]:.3f}, {o['position'][2]:.3f})"
+        + (f" in the {o['held_by']} hand" if o["held_by"] else "")
+        for o in e["objects"]
+    )
+    return f"{e['task'] or 'start'}: observed ({e['reason'].replace('_', ' ')}; {how}): {where}"
