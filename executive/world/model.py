@@ -1,7 +1,9 @@
 """Builds the MuJoCo world of a scenario: robot + floor + table + objects + obstacles.
 
 Two worlds per run: the *estimate* is the scene as the
-robot believes it (nominal poses and parameters); the *truth* is what physics
+robot believes it (nominal poses and parameters at start-up; its objects then
+follow what the robot observes, and which hand holds which object, ``World.held``:
+:mod:`executive.world.observation`); the *truth* is what physics
 runs, sampled from the scenario's ``uncertainty`` block with an injected
 ``numpy.random.Generator``. The planner and the risk models only ever see the
 estimate.
