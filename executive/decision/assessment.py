@@ -124,10 +124,9 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
     collision = _collision(collision_model, plan)
     grasp_step = next((s for s in plan.steps if s.kind == "grasp"), None)
     if pushes is not None and grasp_step is None:  # a push holds nothing: its drop mode is falling short
-        return combine(
-            [collision, fall, assess_placement(world, plan, pushes, scenario.risk, scenario.uncertainty)],
-            scenario.risk,
-        )
+        tol = DetectorThresholds().place_position_tol
+        drop = assess_placement(world, plan, pushes, scenario.risk, scenario.uncertainty, tol)
+        return combine([collision, fall, drop], scenario.risk)
     if grasp_step is None:  # the object is in hand from the start (a place) or never taken
         grasp = _placed_from_hand(world, plan)
     else:

@@ -25,28 +25,44 @@ truth's mass and friction factors (``uncertainty.object_mass``, ``uncertainty.fr
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import Any, Protocol
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from executive.monitoring.detectors import DetectorThresholds
+from executive.planning.timing import Trajectory
 from executive.risk.fall import ExternalForce, force_scale_distribution
 from executive.risk.gaussian import normal_cdf
 from executive.risk.report import RiskReport
 from executive.scenario.types import RiskConfig, Uncertainty
 from executive.world.model import World
 
-if TYPE_CHECKING:
-    from executive.tasks.steps import AlternativePlan
+
+class AlternativePlan(Protocol):
+    """What the push risk reads of a planned alternative (:class:`executive.tasks.steps.AlternativePlan`)."""
+
+    @property
+    def name(self) -> str: ...
+
+    @property
+    def steps(self) -> tuple[Any, ...]: ...  # executive.tasks.steps.Step: kind, side, force
+
+    @property
+    def trajectories(self) -> Mapping[str, Trajectory]: ...
+
 
 __all__ = [
+    "CONTACT_GAP",
+    "GAP_SIGMAS",
     "HAND_TOLERANCE",
+    "AlternativePlan",
     "PushLimits",
     "arm_force_capacity",
     "assess_placement",
+    "descent_gap",
     "hand_compliance",
     "plan_forces",
     "push_limits",
@@ -54,6 +70,12 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+#: m the hand stops behind the object's face before it pushes at least (the planner's 2 cm
+#: clearance is waived for the pushed object, so the gap is what keeps the descent off it).
+CONTACT_GAP = 0.01
+#: The gap is at least this many sigmas of the object's position error (``uncertainty.object_position``):
+#: an object nearer than its estimate by more than the gap is landed on (:func:`descent_gap`).
+GAP_SIGMAS = 3.0
 #: m: a hand further than this from its planned end fails its move (behaviours.move_hand.MoveHand's
 #: default tolerance): a push whose hand lags more stalls there.
 HAND_TOLERANCE = 0.03
@@ -77,6 +99,11 @@ def _arm_dofs(world: World, side: str) -> tuple[NDArray[np.int_], FloatArray]:
         dofs.append(int(model.jnt_dofadr[joint]))
         limits.append(limit * gear)
     return np.array(dofs, dtype=int), np.array(limits)
+
+
+def descent_gap(world: World) -> float:
+    """m between the hand's face and the object's estimated face as the hand comes down behind it."""
+    return max(CONTACT_GAP, GAP_SIGMAS * world.scenario.uncertainty.object_position)
 
 
 def arm_force_capacity(world: World, side: str, qpos: FloatArray, direction: FloatArray) -> float:
@@ -182,10 +209,9 @@ class PushLimits:
     leg: float
     com_yield: FloatArray  # (3,) m/N: the CoM's give (:func:`yielding`), the largest of the knots'
 
-    @property
-    def placed(self) -> float:
-        """N up to which the object ends within the place tolerance: it stops ``c F`` short."""
-        return min(self.saturation, DetectorThresholds().place_position_tol / self.compliance)
+    def placed(self, tolerance: float) -> float:
+        """N up to which the object ends within ``tolerance`` (m) of its target: it stops ``c F`` short."""
+        return min(self.saturation, tolerance / self.compliance)
 
     @property
     def felt(self) -> float:
@@ -259,15 +285,18 @@ def assess_placement(
     external: ExternalForce,
     risk_config: RiskConfig,
     uncertainty: Uncertainty,
+    tolerance: float,
 ) -> RiskReport:
-    """The drop mode of a push: P(the object does not end within the place tolerance of its target).
+    """The drop mode of a push: P(the object does not end within ``tolerance`` (m) of its target).
+
+    ``tolerance``: the failure detectors' ``place_position_tol``.
 
     Along the push the hand meets the object wherever it is, so its position error there is
     absorbed; the object stops ``c F`` short (``c`` the hand's compliance) and stalls once
     ``F`` exceeds the arm's saturation. Across the push its error ``e ~ N(0, s^2)`` (``s`` the
     scene's ``object_position``) stays: per force scale node, P = 1 if stalled, else
     ``P(|e| > tol - c F) = 2 Phi(-(tol - c F) / s)``; averaged over the nodes' weights. And the
-    hand comes down ``gap`` behind the estimated face (:func:`executive.tasks.push.descent_gap`): an
+    hand comes down ``gap`` behind the estimated face (:func:`descent_gap`): an
     object nearer by more is landed on, ``Phi(-gap / s)``, independent of the rest.
 
     Returns:
@@ -280,7 +309,7 @@ def assess_placement(
     nodes, weights = force_scale_distribution(external.mass_sigma, external.friction_sigma)
     needed = float(np.max(np.linalg.norm(external.force, axis=1)))
     force = nodes * needed
-    room = DetectorThresholds().place_position_tol - limits.compliance * force
+    room = tolerance - limits.compliance * force
     sigma = float(uncertainty.object_position)
     if sigma > 0.0:
         across = 2.0 * normal_cdf(-np.maximum(room, 0.0) / sigma)
@@ -288,8 +317,6 @@ def assess_placement(
         across = np.zeros_like(room)
     stalled = (force > limits.saturation) | (room <= 0.0)
     # Nearer than estimated by more than the descent's gap, the object is landed on.
-    from executive.tasks.push import descent_gap
-
     landed = float(normal_cdf(-descent_gap(world) / sigma)) if sigma > 0.0 else 0.0
     probability = 1.0 - (1.0 - landed) * (1.0 - float(np.sum(weights * np.where(stalled, 1.0, across))))
     details: dict[str, float | str] = {
@@ -297,7 +324,7 @@ def assess_placement(
         "push_force": needed,
         "arm_saturation_force": limits.saturation,
         "hand_stiffness": 1.0 / limits.compliance,
-        "placed_force_limit": limits.placed,
+        "placed_force_limit": limits.placed(tolerance),
         "felt_force_limit": limits.felt,
         "short_by": limits.compliance * needed,
         "stall_probability": float(np.sum(weights[stalled])),

@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.planning.planner import PlanningError
+from executive.risk.push import CONTACT_GAP, descent_gap
 from executive.scenario.types import Body, SceneConfig
 from executive.scenario.yaml_nodes import Node
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict
@@ -35,14 +36,11 @@ from executive.tasks.steps import CompositionConfig, Step
 from executive.world.model import World
 
 __all__ = [
-    "CONTACT_GAP",
-    "GAP_SIGMAS",
     "PUSH_LEG",
     "TIP_CLEARANCE",
     "PushKind",
     "PushLine",
     "PushTask",
-    "descent_gap",
     "push_force",
     "push_line",
     "push_steps",
@@ -50,12 +48,6 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 SIDES = ("left", "right")
-#: m the hand stops behind the object's face before it pushes at least (the planner's 2 cm
-#: clearance is waived for the pushed object, so the gap is what keeps the descent off it).
-CONTACT_GAP = 0.01
-#: The gap is at least this many sigmas of the object's position error (``uncertainty.object_position``):
-#: an object nearer than its estimate by more than the gap is landed on (:func:`descent_gap`).
-GAP_SIGMAS = 3.0
 #: m between the fingertips and the table top while pushing: the planner's 1 cm table distance
 #: plus 5 mm for the arm servos' tracking error under the push.
 TIP_CLEARANCE = 0.015
@@ -199,11 +191,6 @@ def _hand_face(
         reach = max(reach, float(np.max(local @ push)))
         top = max(top, float(-local[:, 2].min()))
     return reach, top
-
-
-def descent_gap(world: World) -> float:
-    """m between the hand's face and the object's estimated face as the hand comes down behind it."""
-    return max(CONTACT_GAP, GAP_SIGMAS * world.scenario.uncertainty.object_position)
 
 
 def _unpushable(step: str, side: str, reason: str) -> PlanningError:
