@@ -459,6 +459,7 @@ class CollisionModel:
         return found
 
     def _layout(self, carried: str | None, allow: Allow) -> _Layout:
+        """The pairs of a query carrying ``carried`` with ``allow`` removed, built once and kept."""
         key = (carried, frozenset(allow))
         cached = self._layouts.get(key)
         if cached is not None:
@@ -476,6 +477,27 @@ class CollisionModel:
         mask = np.ones((len(env), len(robot)), dtype=bool)
         if carried_row:
             mask[-1, -1] = False  # the object against itself
+        self._apply_allow(mask, allow, robot, env)
+        cutoff = self._cutoffs(env, carried_geom)
+        functors = [[self._functor(e, r) for r in robot] for e in env]
+        layout = _Layout(
+            robot=np.array(robot, dtype=int),
+            env=np.array(env, dtype=int),
+            mask=mask,
+            cutoff=cutoff,
+            robot_list=[int(g) for g in robot],
+            env_list=[int(g) for g in env],
+            env_body=[int(self.model.geom_bodyid[e]) for e in env],
+            cutoff_list=[float(c) for c in cutoff],
+            functors=functors,
+            n_pairs=int(np.count_nonzero(mask)),
+        )
+        self._layouts[key] = layout
+        return layout
+
+    def _apply_allow(self, mask: NDArray[np.bool_], allow: Allow, robot: list[int], env: list[int]) -> None:
+        """Clear the (E, R) ``mask``'s pairs that ``allow`` removes; CollisionModelError naming an
+        item that is no environment geom or body, or no (robot, environment) pair."""
         for item in allow:
             if isinstance(item, str):
                 cols = self._resolve(item, env)
@@ -501,6 +523,10 @@ class CollisionModel:
             for e in cols:
                 for r in rows:
                     mask[env.index(e), robot.index(r)] = False
+
+    def _cutoffs(self, env: list[int], carried_geom: int | None) -> FloatArray:
+        """Broad-phase cutoff (m) per environment geom: ``d_safety + margin + n_sigma * sigma``,
+        sigma its body's horizontal 1-sigma combined with a carried object's own."""
         d_safety = self.risk_config.d_safety
         # A carried object's own pose error widens the band in which its pairs are uncertain.
         own = self.carried_sigma.get(carried_geom, 0.0) if carried_geom is not None else 0.0
@@ -513,21 +539,7 @@ class CollisionModel:
                 for e in env
             ]
         )
-        functors = [[self._functor(e, r) for r in robot] for e in env]
-        layout = _Layout(
-            robot=np.array(robot, dtype=int),
-            env=np.array(env, dtype=int),
-            mask=mask,
-            cutoff=cutoff,
-            robot_list=[int(g) for g in robot],
-            env_list=[int(g) for g in env],
-            env_body=[int(self.model.geom_bodyid[e]) for e in env],
-            cutoff_list=[float(c) for c in cutoff],
-            functors=functors,
-            n_pairs=int(np.count_nonzero(mask)),
-        )
-        self._layouts[key] = layout
-        return layout
+        return cutoff
 
     def _functor(self, env: int, robot: int) -> coal.ComputeDistance:
         """The cached coal distance functor of a pair (coal docs, ``ComputeDistance``)."""
@@ -863,17 +875,7 @@ def monte_carlo_collision_probability(
     carried = trajectory.carried[1] if trajectory.carried is not None else None
     layout = model._layout(carried, allow)
     mdl = model.model
-    env_bodies = [int(mdl.geom_bodyid[e]) for e in layout.env]
-    uncertain = sorted({b for b in env_bodies if model.setup.env_sigma.get(b, 0.0) > 0.0})
-    # Draw all shifts up front, bodies in sorted id order (same generator state, same answer);
-    # then the carried object's own shift (it sits in the hand wherever it really was).
-    shifts = {b: rng.normal(0.0, model.setup.env_sigma[b], size=(samples, 2)) for b in uncertain}
-    carried_geom = model._object_geom(carried) if carried is not None else None
-    own_sigma = model.carried_sigma.get(carried_geom, 0.0) if carried_geom is not None else 0.0
-    zero = np.zeros((samples, 2))
-    own = rng.normal(0.0, own_sigma, size=(samples, 2)) if own_sigma > 0.0 else zero
-    own_radius = np.hypot(own[:, 0], own[:, 1])
-    radius = {b: np.hypot(s[:, 0], s[:, 1]) for b, s in shifts.items()}
+    draws = _draw_shifts(model, layout, carried, rng, samples)
     qpos = np.asarray(trajectory.qpos, dtype=float)
     hit_any = np.zeros(samples, dtype=bool)
     per_knot = np.zeros(len(qpos))
@@ -885,36 +887,85 @@ def monte_carlo_collision_probability(
         bounds = model._lower_bounds(data, layout)
         hit = np.zeros(samples, dtype=bool)
         for ei, ri in zip(*np.nonzero(layout.mask), strict=True):
-            env, robot, body = layout.env_list[ei], layout.robot_list[ri], env_bodies[ei]
-            model._place(data, env)
-            model._place(data, robot)
-            moves = robot == carried_geom and own_sigma > 0.0
-            if body not in shifts and not moves:
-                if bounds[ei, ri] <= 0.0:
-                    calls += 1
-                    if model._pair_distance(layout, int(ei), int(ri)) < 0.0:
-                        hit[:] = True
-                continue
-            # Only shifts at least as long together as the pair's lower bound can close it.
-            env_shift = shifts.get(body, zero)
-            reach = radius.get(body, zero[:, 0]) + (own_radius if moves else 0.0)
-            env_transform, robot_transform = model._transforms[env], model._transforms[robot]
-            env_nominal = np.array(data.geom_xpos[env], dtype=float)
-            robot_nominal = np.array(data.geom_xpos[robot], dtype=float)
-            for s in np.nonzero(reach >= bounds[ei, ri])[0]:
-                if hit[s]:
-                    continue
-                dx, dy = env_shift[s]
-                env_transform.setTranslation(env_nominal + np.array([dx, dy, 0.0]))
-                if moves:
-                    ox, oy = own[s]
-                    robot_transform.setTranslation(robot_nominal + np.array([ox, oy, 0.0]))
-                calls += 1
-                if model._pair_distance(layout, int(ei), int(ri)) < 0.0:
-                    hit[s] = True
-            model._place(data, env)
-            model._place(data, robot)
+            calls += _sampled_hits(model, data, layout, ei, ri, bounds[ei, ri], draws, hit)
         per_knot[k] = float(np.mean(hit))
         hit_any |= hit
     p = float(np.mean(hit_any))
     return MonteCarloResult(p, math.sqrt(max(p * (1.0 - p), 1e-300) / samples), per_knot, samples, calls)
+
+
+class _Shifts(NamedTuple):
+    """The Monte Carlo samples' pose errors: each environment geom's body (layout order), each
+    uncertain body's (samples, 2) shifts and their lengths, the carried object's geom (None)
+    with its own sigma, shifts and their lengths, and zero shifts."""
+
+    env_bodies: list[int]
+    by_body: dict[int, FloatArray]
+    radius: dict[int, FloatArray]
+    carried_geom: int | None
+    own_sigma: float
+    own: FloatArray
+    own_radius: FloatArray
+    zero: FloatArray
+
+
+def _draw_shifts(
+    model: CollisionModel, layout: _Layout, carried: str | None, rng: np.random.Generator, samples: int
+) -> _Shifts:
+    """Draw all shifts up front, bodies in sorted id order (same generator state, same answer);
+    then the carried object's own shift (it sits in the hand wherever it really was)."""
+    env_bodies = [int(model.model.geom_bodyid[e]) for e in layout.env]
+    uncertain = sorted({b for b in env_bodies if model.setup.env_sigma.get(b, 0.0) > 0.0})
+    shifts = {b: rng.normal(0.0, model.setup.env_sigma[b], size=(samples, 2)) for b in uncertain}
+    carried_geom = model._object_geom(carried) if carried is not None else None
+    own_sigma = model.carried_sigma.get(carried_geom, 0.0) if carried_geom is not None else 0.0
+    zero = np.zeros((samples, 2))
+    own = rng.normal(0.0, own_sigma, size=(samples, 2)) if own_sigma > 0.0 else zero
+    own_radius = np.hypot(own[:, 0], own[:, 1])
+    radius = {b: np.hypot(s[:, 0], s[:, 1]) for b, s in shifts.items()}
+    return _Shifts(env_bodies, shifts, radius, carried_geom, own_sigma, own, own_radius, zero)
+
+
+def _sampled_hits(
+    model: CollisionModel,
+    data: mujoco.MjData,
+    layout: _Layout,
+    ei: np.intp,
+    ri: np.intp,
+    bound: float,
+    draws: _Shifts,
+    hit: NDArray[np.bool_],
+) -> int:
+    """Mark in ``hit`` the samples in which layout pair (env ei, robot ri), ``bound`` its nominal
+    broad-phase lower bound at the knot in ``data``, penetrates; returns the coal calls made."""
+    env, robot, body = layout.env_list[ei], layout.robot_list[ri], draws.env_bodies[ei]
+    model._place(data, env)
+    model._place(data, robot)
+    moves = robot == draws.carried_geom and draws.own_sigma > 0.0
+    if body not in draws.by_body and not moves:
+        if bound <= 0.0:
+            if model._pair_distance(layout, int(ei), int(ri)) < 0.0:
+                hit[:] = True
+            return 1
+        return 0
+    calls = 0
+    # Only shifts at least as long together as the pair's lower bound can close it.
+    env_shift = draws.by_body.get(body, draws.zero)
+    reach = draws.radius.get(body, draws.zero[:, 0]) + (draws.own_radius if moves else 0.0)
+    env_transform, robot_transform = model._transforms[env], model._transforms[robot]
+    env_nominal = np.array(data.geom_xpos[env], dtype=float)
+    robot_nominal = np.array(data.geom_xpos[robot], dtype=float)
+    for s in np.nonzero(reach >= bound)[0]:
+        if hit[s]:
+            continue
+        dx, dy = env_shift[s]
+        env_transform.setTranslation(env_nominal + np.array([dx, dy, 0.0]))
+        if moves:
+            ox, oy = draws.own[s]
+            robot_transform.setTranslation(robot_nominal + np.array([ox, oy, 0.0]))
+        calls += 1
+        if model._pair_distance(layout, int(ei), int(ri)) < 0.0:
+            hit[s] = True
+    model._place(data, env)
+    model._place(data, robot)
+    return calls
