@@ -279,12 +279,36 @@ class FailureDetector:
         obstacles = np.array(list(ids.obstacle_geoms.values()), dtype=np.int64)
         floor = np.array([ids.floor_geom] if ids.floor_geom >= 0 else [], dtype=np.int64)
 
+        base = self._base_codes = self._code_table(robot, soles, objects, obstacles, floor)
+        self._clearance_setup(
+            np.concatenate([robot, objects]), np.concatenate([self._table, obstacles, objects])
+        )
+        self._codes = base.copy()
+        self._code_rows: list[list[int]] = base.tolist()
+        self._carried: tuple[str, str] | None = None
+        self._grasping: tuple[str, str] | None = None
+        self._placing: str | None = None
+        self._approaching: tuple[str, str] | None = None
+        self._pushing: tuple[str, str] | None = None
+        self.set_phase()
+
+    @staticmethod
+    def _put(a: NDArray[np.int64], b: NDArray[np.int64], code: int, table: NDArray[np.int8]) -> None:
+        """Set ``code`` for every geom pair of ``a`` x ``b`` (both ways) in ``table``."""
+        table[np.ix_(a, b)] = code
+        table[np.ix_(b, a)] = code
+
+    def _code_table(
+        self,
+        robot: NDArray[np.int64],
+        soles: NDArray[np.int64],
+        objects: NDArray[np.int64],
+        obstacles: NDArray[np.int64],
+        floor: NDArray[np.int64],
+    ) -> NDArray[np.int8]:
+        """The geom x geom contact codes with no phase declared (module doc, "Allowed contacts")."""
+        m, put = self._m, self._put
         base = np.zeros((m.ngeom, m.ngeom), dtype=np.int8)
-
-        def put(a: NDArray[np.int64], b: NDArray[np.int64], code: int, table: NDArray[np.int8]) -> None:
-            table[np.ix_(a, b)] = code
-            table[np.ix_(b, a)] = code
-
         put(robot, robot, _SELF, base)
         put(robot, floor, _FALL, base)
         put(soles, floor, _ALLOWED, base)
@@ -294,14 +318,17 @@ class FailureDetector:
         put(objects, obstacles, _COLLISION, base)
         put(objects, self._table, _ALLOWED, base)
         put(objects, objects, _ALLOWED, base)
-        self._base_codes = base
-        self._put = put
-        # Clearance broad phase: moving geoms (robot, objects) vs scene things. Things welded
-        # to the world (table, obstacles) are boxes whose frames never move: a mover's centre
-        # is taken into all of them with one matrix product. Things that move (objects, any
-        # obstacle that is not static) use their bounding spheres.
-        self._clr_movers = np.concatenate([robot, objects])
-        candidates = np.concatenate([self._table, obstacles, objects])
+        return base
+
+    def _clearance_setup(self, movers: NDArray[np.int64], candidates: NDArray[np.int64]) -> None:
+        """The closest call's broad phase: moving geoms (robot, objects) vs scene things.
+
+        Things welded to the world (table, obstacles) are boxes whose frames never move: a mover's
+        centre is taken into all of them with one matrix product. Things that move (objects, any
+        obstacle that is not static) use their bounding spheres.
+        """
+        m, d = self._m, self._d
+        self._clr_movers = movers
         is_box = m.geom_type[candidates] == mujoco.mjtGeom.mjGEOM_BOX
         welded = m.body_weldid[m.geom_bodyid[candidates]] == 0
         static = candidates[is_box & welded]
@@ -318,7 +345,7 @@ class FailureDetector:
         self._clr_half = np.concatenate([m.geom_size[static].reshape(-1), np.zeros(3 * n_moving)])
         # Sums the three squared components of each thing's block: (3 K) x K.
         self._clr_sum = np.kron(np.eye(n_static + n_moving), np.ones((3, 1)))
-        rb_movers = m.geom_rbound[self._clr_movers][:, None]
+        rb_movers = m.geom_rbound[movers][:, None]
         self._clr_base_offset = np.concatenate(
             [np.broadcast_to(-rb_movers, (len(rb_movers), n_static)), -rb_movers - m.geom_rbound[moving]],
             axis=1,
@@ -327,14 +354,6 @@ class FailureDetector:
         self._clr_offset = self._clr_base_offset
         self._clr_best = math.nan
         self._clr_limit_sq = np.zeros_like(self._clr_base_offset)
-        self._codes = base.copy()
-        self._code_rows: list[list[int]] = base.tolist()
-        self._carried: tuple[str, str] | None = None
-        self._grasping: tuple[str, str] | None = None
-        self._placing: str | None = None
-        self._approaching: tuple[str, str] | None = None
-        self._pushing: tuple[str, str] | None = None
-        self.set_phase()
 
     # --- phase ---------------------------------------------------------------------------
 
