@@ -40,9 +40,9 @@ def test_pick_and_place_blocks_are_read() -> None:
     assert mission[0] == PickTask(object="book", alternatives=("left", "right"))
     place = mission[1]
     assert isinstance(place, PlaceTask)
-    assert place.to == (0.38, 0.50, None) and place.alternatives == ("left", "right")
+    assert place.to == (0.45, 0.50, None) and place.alternatives == ("left", "right")
     assert place.to_yaw_rad == pytest.approx(math.pi / 2)
-    assert place.label() == "place book at (0.38, 0.50)"
+    assert place.label() == "place book at (0.45, 0.50)"
 
 
 @pytest.mark.parametrize(
@@ -165,5 +165,5 @@ def test_pick_then_place_in_physics_puts_the_book_at_its_target(tmp_path: Path) 
     assert held_at[2] > 0.8 + 0.05  # held above the table top after the pick
     assert drift and max(drift) < 0.005  # held still while the place was planned
     pos = truth.data.xpos[book]
-    assert math.hypot(pos[0] - 0.38, pos[1] - 0.50) < 0.02
+    assert math.hypot(pos[0] - 0.45, pos[1] - 0.50) < 0.02
     assert pos[2] == pytest.approx(0.80 + 0.025, abs=0.003)  # resting on the table top
