@@ -116,6 +116,30 @@ def test_a_pick_with_nothing_in_hand_is_reported_as_a_drop() -> None:
     assert verdict.failure is not None and verdict.failure.mode == "drop"
 
 
+def test_a_places_misplacement_risk_matches_monte_carlo_of_the_measured_grip() -> None:
+    """The grip measured from 2 looks of 1 cm per axis lands its error on the target: P(|e| > 2 cm)."""
+    from executive.decision.assessment import _placed_from_hand
+    from executive.tasks.steps import AlternativePlan, Step
+    from executive.world.model import Grip
+
+    doc = _doc()
+    doc["uncertainty"]["object_position"] = 0.01
+    scenario = _loads(doc)
+    world = build(scenario)
+    world.held["book"] = "left"
+    world.grips["book"] = Grip("left", np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), looks=2)
+    steps = (
+        Step("place", "left.place", "left", carried=("left", "book")),
+        Step("release", "left.release", "left"),
+    )
+    plan = AlternativePlan("left", scenario.mission[1], steps)
+    drop = _placed_from_hand(world, plan)
+    rng = np.random.default_rng(7)
+    error = rng.normal(0.0, 0.01 / math.sqrt(2), (400_000, 2))
+    expected = float(np.mean(np.hypot(error[:, 0], error[:, 1]) > 0.02))
+    assert drop.probability == pytest.approx(expected, abs=0.001)  # 0.0183
+
+
 def test_bundled_scenario_validates() -> None:
     out = subprocess.run(
         [*CMD, "validate", "pick_place_push"], capture_output=True, text=True, env=ENV, timeout=120

@@ -59,8 +59,7 @@ class PlaceTask(Task):
 
 def holder_of(world: World, obj: str) -> str | None:
     """The side of the hand that holds ``obj`` in the estimate ``world`` (None: no hand)."""
-    held_by = getattr(world, "held_by", None)
-    return held_by(obj) if callable(held_by) else None
+    return world.held_by(obj)
 
 
 def _body(world: World, obj: str) -> Body:
@@ -219,7 +218,7 @@ def site_offset(world: World, obj: str, cfg: CompositionConfig) -> FloatArray:
     the centre.
     """
     pos, quat = world.object_pose(obj)
-    grip = getattr(world, "grips", {}).get(obj)
+    grip = world.grips.get(obj)
     if grip is None or not grip.looks:
         return (grasp_height(_body(world, obj), float(pos[2]), cfg) - float(pos[2])) * UP
     to_object, rel = np.zeros(9), np.zeros(9)
