@@ -898,13 +898,14 @@ def run_campaign(
         f"({', '.join(names)}), seed {base_seed}, {jobs} job(s) on {backend}; run folder {folder}"
     )
     _log_resumed(log, trials_path, len(records), len(specs), duplicates, beyond, n)
+    _log_alone(log, scenario, task_index)
     run = _execute(scenario, task_index, jobs, backend, folder, names, specs, records, log, stream)
     records.sort(
         key=lambda r: (r["trial"], names.index(r["alternative"]) if r["alternative"] in names else 0)
     )
     summary = summarise(scenario, records, names, run.predictions)
     summary.update(
-        task=f"{task_index}: transfer {task.object}",
+        task=f"{task_index}: {task.label()}",
         seed=base_seed,
         trials_per_alternative=n,
         complete=len(records) == n * len(names),
@@ -991,6 +992,16 @@ def _claim_folder(folder: Path, trials_path: Path, config: dict[str, Any], resum
     lock = FolderLock(folder)
     _write_config(folder, config)
     return lock
+
+
+def _log_alone(log: Callable[[str], Any], scenario: Scenario, task_index: int) -> None:
+    """Say that a later task of a mission runs alone, from the scenario's scene."""
+    if task_index:
+        before = "; ".join(f"{i}: {t.label()}" for i, t in enumerate(scenario.mission[:task_index]))
+        log(
+            f"task {task_index} runs alone, from the scenario's scene: the tasks before it ({before}) "
+            "do not run first, so what they would have moved or left in hand is where the scene has it"
+        )
 
 
 def _log_resumed(
