@@ -25,6 +25,7 @@ from executive.cli.progress import observed
 from executive.decision.approval import ApprovalDecision, ApprovalRequest, CallbackChannel
 from executive.decision.assessment import assess_task
 from executive.decision.audit import now_iso
+from executive.errors import ExecutiveError
 from executive.planning.planner import Planner
 from executive.risk.rollouts import with_rollouts
 from executive.robot.interface import HostRobot, JointState
@@ -237,6 +238,9 @@ def test_a_host_robot_supplies_what_it_sees() -> None:
     seen = (np.array([0.5, 0.2, 0.825]), np.array([math.cos(0.1), 0.0, 0.0, math.sin(0.1)]))
 
     class Hardware:
+        def __init__(self) -> None:
+            self.objects: dict[str, tuple[np.ndarray, np.ndarray]] = {"book": seen}
+
         def read(self) -> JointState:
             world = build(scenario)
             qpos = world.data.qpos
@@ -255,7 +259,7 @@ def test_a_host_robot_supplies_what_it_sees() -> None:
                 float(qpos[base + 5]),
                 float(qpos[base + 6]),
             )
-            return JointState(1.5, joints, position, quat, {"book": seen})
+            return JointState(1.5, joints, position, quat, self.objects)
 
         def send_joint_targets(self, targets: Mapping[str, float]) -> None: ...
 
@@ -264,7 +268,8 @@ def test_a_host_robot_supplies_what_it_sees() -> None:
         def hand_contacts(self, side: str, obj: str) -> tuple[int, float]:
             return 0, 0.0
 
-    robot = HostRobot(build(scenario), Hardware())
+    hardware = Hardware()
+    robot = HostRobot(build(scenario), hardware)
     estimate = build(scenario)
     fields = refresh(estimate, robot, {"left": "book"}, "at_start")
     assert fields["source"] == {"source": "host"} and fields["time"] == 1.5
@@ -272,6 +277,9 @@ def test_a_host_robot_supplies_what_it_sees() -> None:
     assert np.allclose(book["position"], seen[0]) and book["yaw"] == pytest.approx(0.2)
     assert book["held_by"] is None  # the record says held, the touch says not: not held
     assert np.allclose(estimate.object_pose("book")[0], seen[0])
+    hardware.objects = {"ghost": seen}
+    with pytest.raises(ExecutiveError, match=r"names \['ghost'\], which scenario 'book_transfer' does not"):
+        robot.sync()
 
 
 def test_an_object_in_two_hands_is_held_by_the_hand_that_grasped_it_first() -> None:

@@ -157,6 +157,7 @@ class HostRobot:
             qpos[adr] = state.joints[name]
         qpos[self._base : self._base + 3] = state.base_position
         qpos[self._base + 3 : self._base + 7] = state.base_quat
+        self._check_objects(state.objects)
         for name, (pos, quat) in state.objects.items():
             adr = self.world.ids.object_qpos[name]
             qpos[adr : adr + 3], qpos[adr + 3 : adr + 7] = pos, quat
@@ -165,6 +166,16 @@ class HostRobot:
         self.data.time = self._time
         mujoco.mj_forward(self.model, self.data)
         return self.detector.check()
+
+    def _check_objects(self, objects: Mapping[str, object]) -> None:
+        """Every object the host reports must be one of the scenario's."""
+        known = self.world.ids.object_qpos
+        unknown = sorted(set(objects) - set(known))
+        if unknown:
+            raise ExecutiveError(
+                f"the host's JointState.objects names {unknown}, which scenario "
+                f"'{self.world.scenario.name}' does not have (its objects: {sorted(known)})"
+            )
 
     def observe_objects(self) -> dict[str, tuple[FloatArray, FloatArray]]:
         """The object poses of the last :meth:`sync` (``JointState.objects``): name -> (position, quat).
