@@ -84,13 +84,28 @@ def test_bad_blocks_name_the_key(index: int, block: dict[str, Any], where: str, 
 
 def test_a_target_is_free_only_once_an_earlier_task_took_its_object_away() -> None:
     doc = _doc()
-    transfer = doc["mission"][2]  # the box to where the book lies at the start
+    pick, place, transfer = doc["mission"][:3]  # the transfer: the box to where the book lies at first
     doc["mission"] = [transfer]
     with pytest.raises(ScenarioError) as err:
         _loads(doc)
     assert "mission[0].transfer.to" in str(err.value) and "book" in str(err.value)
-    doc["mission"] = [{"pick": {"object": "book"}}, transfer]
-    assert len(_loads(doc).mission) == 2
+    doc["mission"] = [pick, place, transfer]
+    assert len(_loads(doc).mission) == 3
+    place["place"]["to"] = [0.52, 0.26]  # the book put back where it was: the box's target again
+    with pytest.raises(ScenarioError) as err:
+        _loads(doc)
+    assert "mission[2].transfer.to" in str(err.value) and "book" in str(err.value)
+
+
+@pytest.mark.parametrize("between", [3, 0])  # the push; a second pick (of the book again)
+def test_only_the_place_may_follow_a_pick(between: int) -> None:
+    doc = _doc()
+    pick, place = doc["mission"][0], doc["mission"][1]
+    doc["mission"] = [pick, doc["mission"][between], place]
+    kind = next(iter(doc["mission"][1]))
+    with pytest.raises(ScenarioError) as err:
+        _loads(doc)
+    assert f"mission[1].{kind}: 'book' is still in hand (picked by mission[0].pick)" in str(err.value)
 
 
 def test_place_supports_only_the_hand_that_holds_the_object() -> None:

@@ -8,7 +8,9 @@
 * a transfer target off the table, floating, or where the object would overlap an obstacle or
   another object;
 * the table, a task's object or its target far outside the robot's reach (the reach measured in
-  the robot's MJCF, :mod:`executive.robot.model`; ``REACH_SLACK`` beyond it).
+  the robot's MJCF, :mod:`executive.robot.model`; ``REACH_SLACK`` beyond it);
+* a task between a pick and the place of the object it picked (not supported: the physics
+  checks and the detectors follow one object in hand, that task's own).
 
 Types and ranges are the readers' job (:mod:`executive.scenario.scene`); this module assumes
 they passed. It is called at the end of :func:`executive.scenario.load` and friends.
@@ -65,6 +67,7 @@ def check_scene(root: Node, scenario: Scenario, facts: RobotFacts | None) -> Non
     for i, item in enumerate(objects):
         _check_clear(root, f"{item.path}.position", item, [*obstacles, *objects[:i]], "the object")
         _check_resting(root, f"{item.path}.position", item, scene.table, [*obstacles, *objects], "the object")
+    _check_in_hand(root, scenario)
     # Each target is checked against the objects where the tasks before it left them: a task
     # with a target leaves its object there, a pick takes it off the table into a hand.
     now = list(objects)
@@ -76,6 +79,20 @@ def check_scene(root: Node, scenario: Scenario, facts: RobotFacts | None) -> Non
             now = [*(o for o in now if o.name != task.object), placed]
         elif task.kind == "pick":
             now = [o for o in now if o.name != task.object]
+
+
+def _check_in_hand(root: Node, scenario: Scenario) -> None:
+    """Fail at a task that comes after a pick and before the place of the object picked."""
+    picked: tuple[int, str] | None = None  # (task index, object) in hand
+    for t, task in enumerate(scenario.mission):
+        if picked is not None and not (task.kind == "place" and task.object == picked[1]):
+            _fail(
+                root,
+                f"mission[{t}].{task.kind}",
+                f"'{picked[1]}' is still in hand (picked by mission[{picked[0]}].pick): only its "
+                "place may come next; a task while an object is held is not supported",
+            )
+        picked = (t, task.object) if task.kind == "pick" else None
 
 
 def _placed(
