@@ -42,7 +42,7 @@ class RiskGuard(py_trees.decorators.Decorator):
     Args:
         child: the motion to guard.
         side, kind, obj, allow_contact: the motion step's hand, kind, task object and
-            planned contacts (:class:`executive.tasks.steps.Step`), for the allowances.
+            planned contacts (:class:`executive.planning.plan.Step`), for the allowances.
         every: check every ``every``-th tick (1: every tick).
     """
 

@@ -28,9 +28,9 @@ class MoveHand(RobotBehaviour):
     (:meth:`Trajectory.sample_many`, one vectorised call instead of two samples per tick); a
     tick whose trajectory time is not the next sampled one (a host's robot whose clock does
     not advance by exactly one period per tick) samples afresh from its own time. On the bundled
-    physics (:class:`executive.robot.simulated.SimulatedRobot`) the legs' static load of each sampled
+    physics (:class:`executive.execution.simulated.SimulatedRobot`) the legs' static load of each sampled
     target (the leg servos' feed-forward) is computed with them, in one batch
-    (:meth:`executive.robot.simulated.JointTargetController.leg_loads`).
+    (:meth:`executive.execution.simulated.JointTargetController.leg_loads`).
     """
 
     chunk: int = 25  # control periods sampled ahead (0.5 s at 50 Hz)

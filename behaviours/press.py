@@ -5,7 +5,7 @@ step's planned trajectory (from ``standoff`` off the surface to the servo depth 
 faster than ``seek_speed`` along the push, up to where the plan touches the surface or the hand
 does. From there it closes the loop on the contact force between the hand's geoms and the target's
 (``mujoco.mj_contactForce``, normal components summed): the arm's servo targets move by
-``J^T u / kp`` (:func:`executive.tasks.press_geometry.servo_shift`) for a push ``u`` that creeps on
+``J^T u / kp`` (:func:`executive.planning.press_geometry.servo_shift`) for a push ``u`` that creeps on
 at ``seek_speed`` until the first touch and then integrates the force error, until the force has
 stayed within half the tolerance for ``steady_s``; then it must stay within ``tolerance`` for
 ``hold_s``. At the end the target fades back to the plan's last knot (where the release starts).
@@ -26,7 +26,7 @@ import py_trees
 
 from behaviours.robot_access import RobotBehaviour
 from executive.planning.planner import Trajectory
-from executive.tasks.press_geometry import press_compliance, servo_shift
+from executive.planning.press_geometry import press_compliance, servo_shift
 
 __all__ = ["Press", "SetGripper"]
 

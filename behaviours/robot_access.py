@@ -2,7 +2,7 @@
 
 Keys (namespace ``/executive``):
 
-* ``robot``: the :class:`executive.robot.simulated.SimulatedRobot` (or any object with
+* ``robot``: the :class:`executive.execution.simulated.SimulatedRobot` (or any object with
   the same methods) the host steps; read-only for behaviours.
 * ``holding``: ``dict[str, str]`` side -> name of the object that hand holds;
   written by grasp/release behaviours, read by the others.

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import sys
 
-from executive.runtime.runner import run_alternative
+from executive.execution.runner import run_alternative
 from executive.scenario import load
 
 

@@ -49,9 +49,9 @@ from typing import Any
 import mujoco
 import numpy as np
 
+import executive.execution.simulated as execution
 import executive.monitoring.detectors as detectors
 import executive.monitoring.live_risk as live_risk
-import executive.robot.simulated as execution
 from behaviours.move_hand import MoveHand
 from executive.runtime.mission import Executive, freeze_startup_heap
 
@@ -62,7 +62,7 @@ class _PeriodRecording:
     """Records the controls of every physics step the executive takes, per control period.
 
     ``SimulatedRobot.advance`` writes, in step ``k`` of a period, row ``k`` of the
-    :class:`executive.robot.simulated.ServoPeriod` that ``JointTargetController.period`` returned
+    :class:`executive.execution.simulated.ServoPeriod` that ``JointTargetController.period`` returned
     (row 0 for a fixed target) to the servo actuators, and leaves every other ctrl (the
     grippers) as it set them for the period. So a period is recorded by that ServoPeriod,
     ``data.ctrl`` after the period and the number of steps taken, and each step's ctrl is
@@ -119,7 +119,7 @@ class _PeriodRecording:
 
 
 class _StepRecording:
-    """Stands in for the ``mujoco`` module inside ``executive.robot.simulated``: records each
+    """Stands in for the ``mujoco`` module inside ``executive.execution.simulated``: records each
     step's ctrl before stepping and times the ``mj_step`` call; everything else is the real
     module. For the breakdown's per-step physics times (it costs a wrapped call per step)."""
 

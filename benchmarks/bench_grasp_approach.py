@@ -20,11 +20,12 @@ import numpy as np
 import py_trees
 
 from behaviours.robot_access import install
+from executive.execution.simulated import SimulatedRobot
+from executive.planning.plan import AlternativePlan
 from executive.planning.planner import Planner, PlanningError
 from executive.risk.grasp import approach_envelope
-from executive.robot.simulated import SimulatedRobot
 from executive.scenario import load
-from executive.tasks.steps import AlternativePlan, build_subtree, plan_alternative
+from executive.tasks.steps import build_subtree, plan_alternative
 from executive.world.model import World, build
 
 

@@ -3,7 +3,7 @@
 For each alternative of the heavy-box variant of ``book_transfer`` (the book replaced by a box
 of the given size and mass, same place), prints the predicted drop probability (grasp, hold
 and their union, :func:`executive.decision.assessment.assess_plan`) and the outcome of ``count``
-truths drawn by the truth sampler and run in physics (``executive.runtime.runner.run_alternative``),
+truths drawn by the truth sampler and run in physics (``executive.execution.runner.run_alternative``),
 with the failures counted by kind: the receiver closing on nothing, an object lost from a hand,
 a misplaced object, anything else. Per handover trial, also the model's critical mass at the
 trial's own lateral offset and yaw error against the trial's mass.
@@ -21,12 +21,12 @@ from pathlib import Path
 import numpy as np
 
 from executive.decision.assessment import assess_plan
+from executive.execution.runner import run_alternative
 from executive.planning.planner import Planner
 from executive.risk.collision import CollisionModel
 from executive.risk.hold import critical_mass, hold_problem
-from executive.runtime.runner import run_alternative
 from executive.scenario import loads
-from executive.scenario.types import Scenario
+from executive.schema.types import Scenario
 from executive.tasks.steps import plan_alternative
 from executive.world.model import World, build, sample_perturbation
 

@@ -29,7 +29,7 @@ import numpy as np
 from bench_executive import STATE, _PeriodRecording, _replay
 
 from executive.decision.assessment import assess_task
-from executive.risk.rollouts import (
+from executive.decision.physics_check import (
     RolloutJob,
     RolloutPool,
     check_alternatives,
@@ -38,7 +38,7 @@ from executive.risk.rollouts import (
     with_rollouts,
 )
 from executive.scenario import load
-from executive.scenario.types import Scenario
+from executive.schema.types import Scenario
 from executive.world.model import build
 
 

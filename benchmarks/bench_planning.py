@@ -29,10 +29,10 @@ import numpy as np
 from raw_reference import raw_distances, record_pairs
 
 from executive.decision.assessment import AlternativeRisk, assess_plan, assess_task
+from executive.planning.plan import AlternativePlan
 from executive.planning.planner import Planner
 from executive.risk.collision import CollisionModel
 from executive.scenario import load
-from executive.tasks.steps import AlternativePlan
 from executive.world.model import World, build
 
 __all__ = ["main"]

@@ -19,17 +19,17 @@ from typing import ClassVar
 
 import numpy as np
 
-import executive.runtime.runner as runner
+import executive.execution.runner as runner
 from executive.decision.assessment import concatenate
 from executive.monitoring.detectors import DetectorThresholds, Failure, FailureDetector
 from executive.planning.planner import Planner, PlanningError
 from executive.risk.fall import assess_fall, support_polygon
+from executive.robot.posture import standing_pelvis_height
 from executive.scenario import loads
-from executive.scenario.types import Scenario
+from executive.schema.types import Scenario
 from executive.tasks.steps import plan_alternative
 from executive.world.model import World, build
 from executive.world.polygon import signed_margin
-from executive.world.posture import standing_pelvis_height
 
 __all__ = ["main"]
 

@@ -50,8 +50,8 @@ if TYPE_CHECKING:
         TerminalChannel,
         make_channel,
     )
+    from executive.execution.robot_interface import HostRobot, JointIO, RobotInterface
     from executive.planning.types import PlanningError
-    from executive.robot.interface import HostRobot, JointIO, RobotInterface
     from executive.runtime.mission import Executive, freeze_startup_heap
     from executive.scenario.loader import from_dict, load, loads
     from executive.tasks.base import Alternative, Task, TaskKind
@@ -64,9 +64,9 @@ _LAZY: dict[str, str] = {
     "load": "executive.scenario.loader",
     "loads": "executive.scenario.loader",
     "from_dict": "executive.scenario.loader",
-    "RobotInterface": "executive.robot.interface",
-    "HostRobot": "executive.robot.interface",
-    "JointIO": "executive.robot.interface",
+    "RobotInterface": "executive.execution.robot_interface",
+    "HostRobot": "executive.execution.robot_interface",
+    "JointIO": "executive.execution.robot_interface",
     "ApprovalChannel": "executive.decision.approval",
     "ApprovalDecision": "executive.decision.approval",
     "ApprovalRequest": "executive.decision.approval",

@@ -27,7 +27,7 @@ from executive.decision.approval import (
     make_channel,
 )
 from executive.decision.audit import now_iso
-from executive.scenario.bundled import scenario_path
+from executive.schema.catalog import scenario_path
 
 DRIVER = Path(__file__).with_name("approval_driver.py")
 PROMPT = TerminalChannel.PROMPT

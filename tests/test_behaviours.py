@@ -12,8 +12,8 @@ import pytest
 from behaviours.gripper import Grasp
 from behaviours.move_hand import MoveHand
 from behaviours.robot_access import install
+from executive.execution.simulated import SimulatedRobot
 from executive.planning.planner import HandTarget, Planner
-from executive.robot.simulated import SimulatedRobot
 from executive.scenario import load
 from executive.world.model import World, build
 

@@ -21,9 +21,9 @@ import numpy as np
 import pytest
 
 from executive.cli.main import main
-from executive.scenario import bundled as registry
 from executive.scenario import load
-from executive.scenario.types import Scenario, TrialsConfig
+from executive.schema import catalog as registry
+from executive.schema.types import Scenario, TrialsConfig
 from executive.validation.campaign import FAILURE_MODES, read_trials, run_campaign
 from executive.validation.stats import clopper_pearson
 from executive.world.model import build, sample_perturbation
@@ -82,8 +82,8 @@ def test_trials_are_the_seeded_truths_executed_in_physics(reference: Path) -> No
 @pytest.mark.slow
 def test_a_trial_reproduces_the_runner_on_its_sampled_truth(reference: Path) -> None:
     """Independent re-execution of one trial with the runner gives the recorded outcome."""
+    from executive.execution.runner import execute_plan
     from executive.planning.planner import Planner
-    from executive.runtime.runner import execute_plan
     from executive.tasks.steps import plan_alternative
 
     scenario = fixed_estimate()
@@ -211,7 +211,7 @@ def test_ray_backend_gives_the_same_trials(reference: Path, tmp_path: Path) -> N
 @pytest.mark.slow
 def test_a_varied_scene_is_planned_and_predicted_per_trial(reference: Path, tmp_path: Path) -> None:
     """With trials.scene_variation each trial plans on its own shifted scene."""
-    from executive.scenario.types import SceneVariation
+    from executive.schema.types import SceneVariation
     from executive.validation.campaign import predict, trial_scene
 
     base = load("book_transfer")
@@ -245,7 +245,7 @@ def test_perception_scale_draws_each_trials_sigmas_and_its_truth_from_them() -> 
     (checked over 4000 trials: mean 0, variance 1 within 5 standard errors), and the factor's
     logarithm is uniform on [log low, log high] (its mean and variance in closed form).
     """
-    from executive.scenario.types import SceneVariation
+    from executive.schema.types import SceneVariation
     from executive.validation.campaign import trial_scene
 
     base = load("book_transfer")

@@ -15,11 +15,12 @@ from typing import Any
 import pytest
 import yaml
 
+from executive.planning.plan import CompositionConfig
 from executive.planning.planner import Planner
 from executive.scenario import from_dict
-from executive.scenario.bundled import scenario_path
-from executive.scenario.types import Scenario
-from executive.tasks.steps import CompositionConfig, plan_alternative
+from executive.schema.catalog import scenario_path
+from executive.schema.types import Scenario
+from executive.tasks.steps import plan_alternative
 from executive.tasks.transfer import transfer_steps
 from executive.world.model import build
 

@@ -39,7 +39,7 @@ def test_validate_bundled_from_another_directory(tmp_path: Path) -> None:
         assert word in text, (word, text)
     # The package found its bundled data from a directory that is not the checkout.
     where = subprocess.run(
-        [sys.executable, "-c", "import executive.scenario.bundled as r; print(r.bundled_root())"],
+        [sys.executable, "-c", "import executive.schema.catalog as r; print(r.bundled_root())"],
         capture_output=True,
         text=True,
         cwd=tmp_path,

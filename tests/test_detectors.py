@@ -240,7 +240,7 @@ def test_a_fall_is_also_seen_by_the_pelvis_height_and_by_a_body_on_the_floor(wor
     by_height = FailureDetector(world, DetectorThresholds(trunk_tilt_deg=179.0))
     failure = _drive(world, by_height, [(3.0, {})], each_step=_push(world, (-1000.0, 0.0, 0.0), 0.3))
     assert failure is not None and failure.mode == "fall" and "below standing" in failure.detail
-    # The limit is the safe posture's (executive.world.posture), measured from the standing keyframe.
+    # The limit is the safe posture's (executive.robot.posture), measured from the standing keyframe.
     posture = world.profile.safe_posture
     assert by_height.pelvis_drop == posture.max_pelvis_drop + posture.pelvis_tolerance
     assert world.data.xpos[world.ids.base_body][2] < by_height.standing_height - by_height.pelvis_drop

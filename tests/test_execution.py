@@ -1,4 +1,4 @@
-"""Executing planned alternatives of the book transfer in physics (executive/runtime/runner.py).
+"""Executing planned alternatives of the book transfer in physics (executive/execution/runner.py).
 
 Outcomes are measured here from the truth world's MuJoCo data (the book body's
 xpos/xquat, the pelvis height, the torso's z axis), not taken from the runner's
@@ -12,8 +12,8 @@ import math
 import numpy as np
 import pytest
 
+from executive.execution.runner import RunResult, execute_plan
 from executive.planning.planner import Planner
-from executive.runtime.runner import RunResult, execute_plan
 from executive.scenario import load
 from executive.tasks.steps import plan_alternative
 from executive.world.model import Perturbation, World, build
@@ -125,7 +125,7 @@ def test_servo_period_writes_joint_ctrl_bit_for_bit_at_every_physics_step() -> N
     ``joint_ctrl`` of the ramped target with the ``qfrc_bias`` of the period's start."""
     import mujoco
 
-    from executive.robot.simulated import SimulatedRobot
+    from executive.execution.simulated import SimulatedRobot
 
     world = build(load(SCENARIO))
     robot = SimulatedRobot(world)
@@ -158,7 +158,7 @@ def test_leg_load_is_the_least_squares_support_of_the_target_pose(monkeypatch: p
     result is static: the floating base's gravity is carried by the feet."""
     import mujoco
 
-    from executive.robot.simulated import JointTargetController
+    from executive.execution.simulated import JointTargetController
 
     world = build(load(SCENARIO))
     c, m = JointTargetController(world), world.model
@@ -248,8 +248,8 @@ def test_a_contact_that_lasts_one_physics_step_inside_a_control_period_is_caught
     """The detectors see every physics step, not only the end of each control period: a collision
     present for a single 2 ms step in the middle of a 20 ms period is reported, at that step,
     and the robot holds from there."""
+    from executive.execution.simulated import SimulatedRobot
     from executive.monitoring.detectors import FailureDetector
-    from executive.robot.simulated import SimulatedRobot
 
     world = build(load(SCENARIO))
     dt = world.model.opt.timestep

@@ -13,8 +13,8 @@ import mujoco
 import numpy as np
 import pytest
 
+from executive.execution.runner import execute_plan
 from executive.planning.planner import Planner
-from executive.runtime.runner import execute_plan
 from executive.scenario import loads
 from executive.tasks.steps import plan_alternative
 from executive.tasks.transfer import transfer_steps

@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 
 from executive.cli.main import main
-from executive.risk.rollouts import with_rollouts
+from executive.decision.physics_check import with_rollouts
 from executive.scenario import load
-from executive.scenario.types import Scenario
+from executive.schema.types import Scenario
 from executive.validation.regret import (
     TrialTable,
     newcombe_interval,

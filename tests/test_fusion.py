@@ -9,7 +9,7 @@ from scipy import integrate, stats
 from executive.risk.combine import combine
 from executive.risk.fusion import ModePosterior, choice_confidence, fuse, posteriors
 from executive.risk.report import RiskReport
-from executive.scenario.types import RiskConfig
+from executive.schema.types import RiskConfig
 
 
 def _analytic(collision: float, fall: float, grasp: float) -> object:

@@ -22,13 +22,14 @@ import py_trees
 import pytest
 
 from behaviours.robot_access import install
+from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.detectors import Failure
+from executive.planning.plan import AlternativePlan
 from executive.planning.planner import Planner
 from executive.risk.grasp import ApproachEnvelope, approach_envelope, approach_miss_probability
-from executive.robot.simulated import SimulatedRobot
 from executive.scenario import load
-from executive.scenario.types import Scenario
-from executive.tasks.steps import AlternativePlan, build_subtree, plan_alternative
+from executive.schema.types import Scenario
+from executive.tasks.steps import build_subtree, plan_alternative
 from executive.world.model import Perturbation, World, build
 
 

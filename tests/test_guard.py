@@ -16,12 +16,13 @@ import pytest
 
 from behaviours.guard import RiskGuard, install_monitor
 from behaviours.robot_access import install
+from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.detectors import FailureDetector
 from executive.monitoring.live_risk import LiveRiskMonitor
+from executive.planning.plan import AlternativePlan
 from executive.planning.planner import Planner
-from executive.robot.simulated import SimulatedRobot
 from executive.scenario import load
-from executive.tasks.steps import AlternativePlan, build_subtree, plan_alternative
+from executive.tasks.steps import build_subtree, plan_alternative
 from executive.world.model import World, build
 
 Status = py_trees.common.Status

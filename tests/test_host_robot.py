@@ -1,4 +1,4 @@
-"""A host's own robot behind the JointIO protocol (executive/robot/interface.py).
+"""A host's own robot behind the JointIO protocol (executive/execution/robot_interface.py).
 
 The host's "hardware" here is a separate MuJoCo truth world the host steps itself
 through its own servo loop; the executive only reads joint states and base pose
@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 from behaviours.gripper import object_contacts
-from executive.robot.interface import HostRobot, JointState
-from executive.robot.simulated import SimulatedRobot
+from executive.execution.robot_interface import HostRobot, JointState
+from executive.execution.simulated import SimulatedRobot
 from executive.runtime.mission import Executive
 from executive.scenario import load
 from executive.world.model import build

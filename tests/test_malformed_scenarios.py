@@ -23,7 +23,7 @@ import yaml
 from scenario_docs import walk  # tests/ is on sys.path (pytest's default prepend import mode)
 
 from executive.cli.main import main
-from executive.scenario import bundled as registry
+from executive.schema import catalog as registry
 
 Doc = dict[str, Any]
 SOURCE = registry.scenario_path("book_transfer").read_text()

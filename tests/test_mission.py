@@ -24,7 +24,7 @@ from executive.decision.approval import ApprovalDecision, ApprovalRequest, Callb
 from executive.decision.audit import now_iso
 from executive.runtime.mission import Executive
 from executive.scenario import load
-from executive.scenario.bundled import scenario_path
+from executive.schema.catalog import scenario_path
 
 SCRIPT = Path(sys.executable).parent / "executive"
 CMD = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli.main"]

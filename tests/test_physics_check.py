@@ -11,11 +11,11 @@ import pytest
 import yaml
 
 from executive.decision.assessment import assess_task
-from executive.risk.rollouts import check_alternatives, estimate_scenario, run_job, with_rollouts
+from executive.decision.physics_check import check_alternatives, estimate_scenario, run_job, with_rollouts
 from executive.runtime.mission import Executive
 from executive.scenario import load, loads
-from executive.scenario.bundled import scenario_path
-from executive.scenario.types import Scenario
+from executive.schema.catalog import scenario_path
+from executive.schema.types import Scenario
 from executive.world.model import build
 
 
@@ -133,7 +133,7 @@ def test_where_the_analytic_models_and_physics_disagree_the_ranking_follows_phys
     its rollouts in physics have the fewest failures. The counts move every fused estimate from
     the analytic value towards the observed frequency, and the ranking follows them.
     """
-    from executive.risk.rollouts import RolloutPool
+    from executive.decision.physics_check import RolloutPool
 
     doc = yaml.safe_load(scenario_path("book_transfer").read_text())
     doc["robot"] = "humanoid"

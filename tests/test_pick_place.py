@@ -16,7 +16,7 @@ import yaml
 
 from executive.errors import ScenarioError
 from executive.scenario import load, loads
-from executive.scenario.bundled import scenario_path
+from executive.schema.catalog import scenario_path
 from executive.tasks.pick_place import PickKind, PickTask, PlaceKind, PlaceTask
 from executive.world.model import build
 
@@ -134,7 +134,7 @@ def test_a_pick_with_nothing_in_hand_is_reported_as_a_drop() -> None:
 def test_a_places_misplacement_risk_matches_monte_carlo_of_the_measured_grip() -> None:
     """The grip measured from 2 looks of 1 cm per axis lands its error on the target: P(|e| > 2 cm)."""
     from executive.decision.assessment import _placed_from_hand
-    from executive.tasks.steps import AlternativePlan, Step
+    from executive.planning.plan import AlternativePlan, Step
     from executive.world.model import Grip
 
     doc = _doc()

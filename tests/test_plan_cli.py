@@ -48,5 +48,5 @@ def test_plan_json_lists_every_alternative_with_probabilities(tmp_path: Path) ->
         # support polygon's edge (min margin ~95 mm vs ~111 mm, sigma 10 mm): a higher P(fall),
         # though every one is tiny (~1e-21 vs ~1e-28). Not the 2.2e-16 floor of 1 - P(inside).
         # Their carry also lowers the pelvis ~4 cm, ~6 sigma above the safe posture's fall floor
-        # (executive/world/posture.py): ~1e-9.
+        # (executive/robot/posture.py): ~1e-9.
         assert 0.0 < risk["left_to_right"]["fall"] < risk[one_arm]["fall"] < 1e-8

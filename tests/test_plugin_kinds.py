@@ -22,11 +22,11 @@ import pytest
 import yaml
 
 from executive.cli.main import main
+from executive.execution.runner import RunResult, execute_plan
 from executive.planning.planner import Planner
 from executive.runtime.mission import Executive
-from executive.runtime.runner import RunResult, execute_plan
 from executive.scenario import load
-from executive.scenario.bundled import scenario_path
+from executive.schema.catalog import scenario_path
 from executive.tasks import registry
 from executive.tasks.steps import plan_alternative
 from executive.world.model import build

@@ -1,4 +1,4 @@
-"""The safe posture (executive/world/posture.py) in the planner, the fall detector and the fall model.
+"""The safe posture (executive/robot/posture.py) in the planner, the fall detector and the fall model.
 
 References: the pelvis heights of the plans themselves (read from their qpos), MuJoCo physics
 (a servoed squat, the turned-book alternatives executed with truth = estimate), a closed-form
@@ -20,20 +20,20 @@ from scipy.stats import norm
 
 from executive.decision.assessment import concatenate
 from executive.errors import RobotProfileError
+from executive.execution.runner import execute_plan
+from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.detectors import FailureDetector
 from executive.planning.limits import PelvisHeightLimit
 from executive.planning.planner import HandTarget, Planner, PlanningError
 from executive.planning.timing import Trajectory
 from executive.risk.fall import assess_fall, support_polygon
+from executive.robot.posture import SafePosture, standing_pelvis_height
 from executive.robot.profile import loads_profile
-from executive.robot.simulated import SimulatedRobot
-from executive.runtime.runner import execute_plan
 from executive.scenario import load, loads
-from executive.scenario.types import RiskConfig, Uncertainty
+from executive.schema.types import RiskConfig, Uncertainty
 from executive.tasks.steps import plan_alternative
 from executive.world.model import World, build
 from executive.world.polygon import signed_margin
-from executive.world.posture import SafePosture, standing_pelvis_height
 
 REPO = Path(__file__).resolve().parents[1]
 SCENARIOS = REPO / "scenarios"

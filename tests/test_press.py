@@ -24,17 +24,18 @@ import pytest
 import behaviours.press as press_behaviour
 from executive.decision.assessment import assess_task, concatenate
 from executive.errors import ScenarioError
+from executive.execution.runner import execute_plan
 from executive.monitoring.detectors import FailureDetector
+from executive.planning.plan import CompositionConfig
 from executive.planning.planner import Planner
+from executive.planning.press_geometry import hand_lead, press_compliance, surface_at
 from executive.risk.fall import assess_fall
 from executive.risk.press import press_forces
 from executive.runtime.mission import Executive
-from executive.runtime.runner import execute_plan
 from executive.scenario import from_dict
-from executive.scenario.types import Body, Scenario
+from executive.schema.types import Body, Scenario
 from executive.tasks.press import PressKind, PressTask
-from executive.tasks.press_geometry import hand_lead, press_compliance, surface_at
-from executive.tasks.steps import CompositionConfig, plan_alternative
+from executive.tasks.steps import plan_alternative
 from executive.world.model import Perturbation, World, build
 
 PANEL = {"name": "panel", "shape": "box", "size": [0.16, 0.16, 0.06], "position": [0.45, -0.22]}

@@ -14,7 +14,7 @@ import yaml
 from executive.errors import RobotProfileError, ScenarioError
 from executive.robot.profile import load_bundled_profile, load_profile, loads_profile
 from executive.robot.profile_types import RobotProfile
-from executive.scenario import bundled as registry
+from executive.schema import catalog as registry
 
 G1_DIR = Path(__file__).resolve().parents[2] / "shared" / "robots" / "unitree_g1"
 

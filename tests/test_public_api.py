@@ -44,7 +44,7 @@ def test_the_integrator_names_resolve() -> None:
     first, count = out.strip().splitlines()
     assert "executive.runtime.mission.Executive" in first
     assert "function load" in first
-    assert "executive.robot.interface.HostRobot" in first
+    assert "executive.execution.robot_interface.HostRobot" in first
     assert int(count) == 26
 
 

@@ -16,18 +16,18 @@ import numpy as np
 import pytest
 
 from executive.decision.assessment import AlternativeRisk, assess_task
+from executive.decision.physics_check import RolloutJob, estimate_scenario, rollout_seed, run_job
 from executive.errors import ScenarioError
+from executive.execution.runner import execute_plan
+from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.detectors import FailureDetector
 from executive.planning.planner import Planner, PlanningError
 from executive.planning.timing import Trajectory
 from executive.risk.fall import ExternalForce, assess_fall, zero_moment_points
 from executive.risk.gaussian import normal_cdf
 from executive.risk.push import yielding
-from executive.risk.rollouts import RolloutJob, estimate_scenario, rollout_seed, run_job
-from executive.robot.simulated import SimulatedRobot
-from executive.runtime.runner import execute_plan
 from executive.scenario.loader import load
-from executive.scenario.types import Body, Scenario
+from executive.schema.types import Body, Scenario
 from executive.tasks.push import PushKind, PushTask
 from executive.tasks.steps import plan_alternative
 from executive.validation.stats import clopper_pearson

@@ -15,13 +15,14 @@ import numpy as np
 import pytest
 import yaml
 
+from executive.execution.runner import execute_plan
+from executive.planning.plan import CompositionConfig
 from executive.planning.planner import Planner, PlanningError
-from executive.runtime.runner import execute_plan
 from executive.scenario import from_dict
-from executive.scenario.bundled import scenario_path
-from executive.scenario.types import Scenario
+from executive.schema.catalog import scenario_path
+from executive.schema.types import Scenario
 from executive.tasks.regrasp import midway_spot
-from executive.tasks.steps import CompositionConfig, plan_alternative
+from executive.tasks.steps import plan_alternative
 from executive.tasks.transfer import TransferKind, transfer_steps
 from executive.world.model import build
 

@@ -30,7 +30,7 @@ from executive.risk.collision import (
 )
 from executive.risk.shapes import coal_geometry, coal_transform
 from executive.scenario import load
-from executive.scenario.types import Body, CollisionRiskConfig, RiskConfig
+from executive.schema.types import Body, CollisionRiskConfig, RiskConfig
 from executive.world.model import World, build
 
 FloatArray = np.ndarray

@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from executive.errors import ExecutiveError
 from executive.risk.combine import combine, probability_of_any
 from executive.risk.report import RiskReport
-from executive.scenario.types import RiskConfig
+from executive.schema.types import RiskConfig
 
 
 def report(mode: str, p: float, severity: float, seed: float) -> RiskReport:

@@ -34,7 +34,7 @@ from executive.risk.fall import (
     support_polygon,
 )
 from executive.scenario import load
-from executive.scenario.types import FallRiskConfig, RiskConfig, Uncertainty
+from executive.schema.types import FallRiskConfig, RiskConfig, Uncertainty
 from executive.world.model import World, build
 
 # Rectangle +-0.10 x +-0.05 m, counter-clockwise.

@@ -31,7 +31,7 @@ from executive.risk.grasp import (
     shake_test,
 )
 from executive.scenario import load
-from executive.scenario.types import GraspRiskConfig, RiskConfig, Uncertainty
+from executive.schema.types import GraspRiskConfig, RiskConfig, Uncertainty
 from executive.world.model import World, build
 
 CFG = GraspRiskConfig()  # scale 0.02 m, x_max 0.05 m, 0.17 rad / 0.52 rad, b = 1, weights 0.6 / 0.4
@@ -393,10 +393,10 @@ def test_an_error_along_the_jaws_is_carried_to_the_target_and_one_across_them_is
     from scipy.stats import norm
 
     from executive.decision.assessment import assess_plan
+    from executive.execution.runner import execute_plan
     from executive.monitoring.detectors import DetectorThresholds
     from executive.planning.planner import Planner
     from executive.risk.collision import CollisionModel
-    from executive.runtime.runner import execute_plan
     from executive.tasks.steps import plan_alternative
     from executive.world.model import Perturbation
 
@@ -427,8 +427,8 @@ def test_a_book_off_by_more_than_the_jaw_clearance_is_a_misaligned_grasp() -> No
     """The truth book 4.5 cm off across the jaws (their clearance is 3 cm a side): a finger lands
     on it during the approach, which the detector reports as a drop (the grasp missed), the
     failure mode the grasp risk's approach window predicts, not as a collision."""
+    from executive.execution.runner import execute_plan
     from executive.planning.planner import Planner
-    from executive.runtime.runner import execute_plan
     from executive.tasks.steps import plan_alternative
     from executive.world.model import Perturbation
 

@@ -19,7 +19,9 @@ import pytest
 
 from behaviours.robot_access import install
 from executive.decision.assessment import assess_plan
+from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.detectors import FailureDetector
+from executive.planning.plan import AlternativePlan, Step
 from executive.planning.planner import Planner
 from executive.risk.collision import CollisionModel
 from executive.risk.hold import (
@@ -41,9 +43,8 @@ from executive.risk.hold import (
     slip_critical_mass,
     squaring_turn,
 )
-from executive.robot.simulated import SimulatedRobot
 from executive.scenario import load, loads
-from executive.tasks.steps import AlternativePlan, Step, build_subtree, plan_alternative
+from executive.tasks.steps import build_subtree, plan_alternative
 from executive.world.model import Perturbation, World, build, sample_perturbation
 
 G = 9.81

@@ -29,7 +29,7 @@ import yaml
 from executive.cli.main import main
 from executive.decision.approval import TerminalChannel
 from executive.decision.audit import AuditLog, RunFolderError
-from executive.scenario.bundled import scenario_path
+from executive.schema.catalog import scenario_path
 
 SCRIPT = Path(sys.executable).parent / "executive"
 CMD = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli.main"]

@@ -10,8 +10,8 @@ import pytest
 import yaml
 
 from executive import scenario
-from executive.scenario import bundled as registry
-from executive.scenario.types import RiskConfig, Scenario, SceneVariation, TrialsConfig, Uncertainty
+from executive.schema import catalog as registry
+from executive.schema.types import RiskConfig, Scenario, SceneVariation, TrialsConfig, Uncertainty
 
 
 def bundled_dict() -> dict:

@@ -11,8 +11,8 @@ from hypothesis import strategies as st
 
 from executive import scenario
 from executive.errors import ScenarioError
-from executive.scenario import bundled as registry
-from executive.scenario.types import Scenario
+from executive.schema import catalog as registry
+from executive.schema.types import Scenario
 
 
 def _valid() -> dict[str, Any]:

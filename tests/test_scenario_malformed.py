@@ -16,7 +16,7 @@ from scenario_docs import walk  # tests/ is on sys.path (pytest's default prepen
 
 from executive import scenario
 from executive.errors import ScenarioError
-from executive.scenario import bundled as registry
+from executive.schema import catalog as registry
 
 Doc = dict[str, Any]
 

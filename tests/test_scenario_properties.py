@@ -1,7 +1,7 @@
 """Any scenario that loads plans and runs to an outcome without a traceback, extreme numbers included.
 
 Hypothesis draws book_transfer documents whose numbers reach the ends of their documented
-ranges (:mod:`executive.scenario.ranges`): object mass, friction, size and yaw, the
+ranges (:mod:`executive.schema.ranges`): object mass, friction, size and yaw, the
 uncertainty, the risk and guard parameters. A document the loader rejects must be rejected
 with a located :class:`ScenarioError`; one it accepts is run by the executive (auto approval,
 sampled truth, real physics) to ``success``, ``failed`` or ``aborted``, with every
@@ -23,8 +23,8 @@ from hypothesis import strategies as st
 from executive.errors import ExecutiveError
 from executive.runtime.mission import Executive
 from executive.scenario import loads
-from executive.scenario import ranges as R
-from executive.scenario.bundled import scenario_path
+from executive.schema import ranges as R
+from executive.schema.catalog import scenario_path
 
 BASE = yaml.safe_load(scenario_path("book_transfer").read_text())
 BASE["robot"] = "humanoid"

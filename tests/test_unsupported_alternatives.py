@@ -14,7 +14,7 @@ import yaml
 
 from executive.decision.assessment import assess_task
 from executive.scenario import from_dict
-from executive.scenario.bundled import robot_profile_path, scenario_path
+from executive.schema.catalog import robot_profile_path, scenario_path
 from executive.tasks.transfer import TransferKind
 from executive.world.model import build
 

@@ -10,7 +10,7 @@ import pytest
 
 from executive.errors import WorldError
 from executive.scenario import load
-from executive.scenario.types import Body, Uncertainty
+from executive.schema.types import Body, Uncertainty
 from executive.world.model import Perturbation, build, build_pair, sample_perturbation, subtree_bodies
 
 
@@ -160,7 +160,7 @@ def test_humanoid_home_is_its_models_keyframe(scenario, estimate) -> None:  # ty
 def _with_home_joints(scenario, tmp_path, home_joints):  # type: ignore[no-untyped-def]
     import yaml
 
-    from executive.scenario import bundled as registry
+    from executive.schema import catalog as registry
 
     path = registry.robot_profile_path("humanoid")
     data = yaml.safe_load(path.read_text())  # type: ignore[union-attr]

@@ -25,14 +25,14 @@ from executive.cli.progress import observed
 from executive.decision.approval import ApprovalDecision, ApprovalRequest, CallbackChannel
 from executive.decision.assessment import assess_task
 from executive.decision.audit import now_iso
+from executive.decision.physics_check import with_rollouts
 from executive.errors import ExecutiveError
+from executive.execution.robot_interface import HostRobot, JointState
+from executive.execution.simulated import SimulatedRobot
 from executive.planning.planner import Planner
-from executive.risk.rollouts import with_rollouts
-from executive.robot.interface import HostRobot, JointState
-from executive.robot.simulated import SimulatedRobot
 from executive.runtime.mission import Executive
 from executive.scenario import load
-from executive.scenario.types import Scenario
+from executive.schema.types import Scenario
 from executive.tasks.registry import get as task_kind
 from executive.tasks.steps import plan_alternative
 from executive.world.model import Perturbation, build, sample_perturbation
@@ -102,11 +102,9 @@ def _run(executive: Executive) -> dict[int, dict[str, np.ndarray]]:
 
 
 def _handover_first() -> Scenario:
-    """book_transfer, trying the handover first (the one-hand reach across is the fallback)."""
+    """book_transfer, trying the handover first (the giver placing it itself is the fallback)."""
     scenario = with_rollouts(load("book_transfer"), 0)
-    return dataclasses.replace(
-        scenario, mission=(scenario.mission[0].restricted(("left_to_right", "right")),)
-    )
+    return dataclasses.replace(scenario, mission=(scenario.mission[0].restricted(("left_to_right", "left")),))
 
 
 def test_replan_after_a_failed_handover_starts_from_the_book_in_the_hand() -> None:
@@ -140,9 +138,16 @@ def test_replan_after_a_failed_handover_starts_from_the_book_in_the_hand() -> No
     assert replan["seq"] == after["seq"] + 1
     assert np.allclose(replan["object"]["position"], book["position"])
     assert np.linalg.norm(np.array(replan["object"]["position"]) - start) > 0.2
-    # nothing after the re-plan fails by collision (the stale estimate had the retries hit the book)
-    later = [f for f in failures if f["seq"] > replan["seq"]]
-    assert all(f["mode"] != "collision" for f in later), later
+    # the retry starts from the hand: the giver puts the book down itself, after the other hand
+    # goes home (the stale estimate had the retries go for the book at its start and hit it)
+    assert replan["alternatives"] == ["left"]
+    assert not [f for f in failures if f["seq"] > replan["seq"]]  # nothing more hits anything
+    retry = [e for e in log.of_kind("dry_run") if e["seq"] > replan["seq"]]
+    assert [e["name"] for e in retry] == ["left"]
+    # It plans (reach, wrist and lane from the hand), and the dry run on the estimate vets it:
+    # with the book as observed (5.7 mm, 5.6 deg from the truth) the other hand's open palm,
+    # still at the book, catches it on the way home, so the retry is refused, not run.
+    assert not retry[0]["ok"] and "right_palm touched book" in retry[0]["reason"], retry[0]
     end = looks[-1]
     assert end["reason"] == "after_task" and end["objects"][0]["held_by"] == "left"
 

@@ -17,10 +17,10 @@ import yaml
 from wave_kind import WaveKind, WaveTask
 
 import executive
+from executive.execution.runner import execute_plan
 from executive.planning.planner import Planner
-from executive.runtime.runner import execute_plan
 from executive.scenario import from_dict
-from executive.scenario.bundled import scenario_path
+from executive.schema.catalog import scenario_path
 from executive.tasks.steps import plan_alternative
 from executive.world.model import build
 

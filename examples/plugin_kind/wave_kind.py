@@ -24,12 +24,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from executive.scenario.scene import over_table
-from executive.scenario.types import SceneConfig
-from executive.scenario.yaml_nodes import Node
+from executive.planning.plan import CompositionConfig, Step
+from executive.schema.readers import over_table
+from executive.schema.types import SceneConfig
+from executive.schema.yaml_nodes import Node
 from executive.tasks.base import Alternative, Task, TaskKind
 from executive.tasks.hands import HandFrames
-from executive.tasks.steps import CompositionConfig, Step
 from executive.world.model import World
 
 __all__ = ["WaveKind", "WaveTask"]

@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING
 
 from executive.cli.output_paths import check_file, check_folder
 from executive.errors import ExecutiveError
-from executive.scenario import bundled as registry
-from executive.scenario.types import Scenario
+from executive.schema import catalog as registry
+from executive.schema.types import Scenario
 from executive.world.model import World, build
 
 if TYPE_CHECKING:
@@ -101,7 +101,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from executive.risk.rollouts import with_rollouts
+    from executive.decision.physics_check import with_rollouts
 
     _check_run_paths(args)
     scenario = with_rollouts(_load(args.scenario), args.rollouts)
@@ -191,7 +191,7 @@ def _save_video(recorder: VideoRecorder) -> None:
 
 def _run_one(scenario: Scenario, args: argparse.Namespace) -> int:
     """One named alternative, no selection and no approval (for tests and comparisons)."""
-    from executive.runtime.runner import run_alternative
+    from executive.execution.runner import run_alternative
 
     task = scenario.mission[0]
     if args.alternative not in task.alternatives:
@@ -217,8 +217,8 @@ def _run_one(scenario: Scenario, args: argparse.Namespace) -> int:
 
 def _cmd_plan(args: argparse.Namespace) -> int:
     from executive.decision.assessment import assess_task
+    from executive.decision.physics_check import PhysicsCheck, with_rollouts
     from executive.report.plots import risk_json, risk_table
-    from executive.risk.rollouts import PhysicsCheck, with_rollouts
 
     if args.plot:
         check_folder(args.plot, "--plot")

@@ -33,6 +33,7 @@ import mujoco
 import numpy as np
 
 from executive.monitoring.detectors import DetectorThresholds
+from executive.planning.plan import AlternativePlan
 from executive.planning.planner import Planner, PlanningError, Trajectory
 from executive.risk.collision import CollisionModel, CollisionProfile, KnotDistance, report_from_profile
 from executive.risk.combine import CombinedRisk, combine
@@ -51,7 +52,7 @@ from executive.risk.push import assess_placement, plan_forces
 from executive.risk.report import RiskReport
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
-from executive.tasks.steps import AlternativePlan, plan_alternative
+from executive.tasks.steps import plan_alternative
 from executive.world.model import World
 
 __all__ = ["AlternativeRisk", "assess_plan", "assess_task", "concatenate", "drop_union"]
@@ -68,7 +69,7 @@ class AlternativeRisk:
     error: str = ""
     plan_s: float = 0.0
     assess_s: float = 0.0
-    physics: dict[str, Any] | None = None  # the physics check's summary (executive.risk.rollouts)
+    physics: dict[str, Any] | None = None  # the physics check's summary (executive.decision.physics_check)
 
 
 def concatenate(trajectories: list[Trajectory], name: str) -> Trajectory:

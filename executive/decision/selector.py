@@ -52,10 +52,10 @@ from executive.decision.approval import AlternativeRisk as RequestRow
 from executive.decision.approval import ApprovalChannel, ApprovalDecision, ApprovalRequest, PendingApproval
 from executive.decision.assessment import AlternativeRisk, assess_task
 from executive.decision.audit import AuditLog
+from executive.decision.physics_check import PhysicsCheck, PhysicsVerdict, physics_text
 from executive.errors import ExecutiveError
 from executive.planning.planner import Planner
 from executive.risk.collision import CollisionModel
-from executive.risk.rollouts import PhysicsCheck, PhysicsVerdict, physics_text
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
 from executive.world.model import World

@@ -15,7 +15,7 @@ Failure modes
     the data after a bad qpos/qvel/qacc (its auto-reset), so the warning counter is
     what still shows it afterwards.
 ``fall``
-    The robot left its safe posture (``profile.safe_posture``, :mod:`executive.world.posture`, the
+    The robot left its safe posture (``profile.safe_posture``, :mod:`executive.robot.posture`, the
     one the planner keeps every plan inside) by more than the posture's tolerance: the base
     (pelvis) more than ``max_pelvis_drop + pelvis_tolerance`` below its standing height
     (the keyframe's), or the torso's z axis more than ``max_trunk_tilt_deg +
@@ -102,8 +102,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.errors import ExecutiveError
+from executive.robot.posture import standing_pelvis_height
 from executive.world.model import World
-from executive.world.posture import standing_pelvis_height
 
 __all__ = [
     "ClosestCall",

@@ -50,7 +50,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.risk.collision import CollisionModel
-from executive.scenario.types import GuardConfig
+from executive.schema.types import GuardConfig
 from executive.world.model import World
 from executive.world.polygon import convex_hull, signed_margin
 

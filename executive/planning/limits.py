@@ -153,7 +153,7 @@ class PelvisHeightLimit(mink.Limit):
     steps, or a start below it) the bound is ``-min(gain (min_height - z), recovery)``: it rises
     back by at most ``recovery`` (m) per step, as :class:`GeomPairCollisionLimit`'s pairs. The
     safe posture's pelvis limit
-    (:class:`executive.world.posture.SafePosture`).
+    (:class:`executive.robot.posture.SafePosture`).
     """
 
     def __init__(

@@ -43,8 +43,8 @@ from executive.planning.types import (
     site_pose,
     site_quat,
 )
+from executive.robot.posture import standing_pelvis_height
 from executive.world.model import World, is_descendant
-from executive.world.posture import standing_pelvis_height
 
 __all__ = [
     "HandTarget",
@@ -105,7 +105,7 @@ class Planner:
       both as bounds on single dofs, see :class:`~executive.planning.limits.JointBounds`),
       the CoM inside the feet's support polygon shrunk by a margin
       (:class:`~executive.planning.limits.SupportPolygonLimit`), the robot's safe posture
-      (:mod:`executive.world.posture`: the torso's tilt, :class:`~executive.planning.limits.TiltLimit`,
+      (:mod:`executive.robot.posture`: the torso's tilt, :class:`~executive.planning.limits.TiltLimit`,
       and the pelvis no lower than its limit below standing,
       :class:`~executive.planning.limits.PelvisHeightLimit`), and collision
       avoidance (:class:`~executive.planning.limits.GeomPairCollisionLimit`) between
@@ -245,7 +245,7 @@ class Planner:
             raise PlanningInputError(f"the robot's base must be body 1 of the model, not {ids.base_body}")
 
     def _safe_posture_limits(self) -> None:
-        """The safe posture (executive.world.posture): the torso's tilt, and the pelvis no lower than
+        """The safe posture (executive.robot.posture): the torso's tilt, and the pelvis no lower than
         its limit below standing (a little higher in the QP, as for the balance, so that the
         second-order drift of a step and the knots between steps stay inside it)."""
         cfg, model, ids = self.config, self.model, self.world.ids

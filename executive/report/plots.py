@@ -15,8 +15,8 @@ from typing import Any
 import numpy as np
 
 from executive.decision.assessment import AlternativeRisk
-from executive.risk.rollouts import physics_text
-from executive.scenario.types import Scenario
+from executive.decision.physics_check import physics_text
+from executive.schema.types import Scenario
 
 __all__ = ["chosen_index", "plot_alternatives", "risk_json", "risk_table"]
 

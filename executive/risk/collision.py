@@ -32,7 +32,7 @@ from executive.risk.collision_probability import (
 )
 from executive.risk.report import RiskReport
 from executive.risk.shapes import coal_geometry
-from executive.scenario.types import CollisionRiskConfig, RiskConfig, Uncertainty
+from executive.schema.types import CollisionRiskConfig, RiskConfig, Uncertainty
 from executive.world.model import World, is_descendant
 
 __all__ = [

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 from executive.errors import ExecutiveError
 from executive.risk.report import RiskReport
-from executive.scenario.types import RiskConfig
+from executive.schema.types import RiskConfig
 
 __all__ = ["CombinedRisk", "combine", "probability_of_any"]
 

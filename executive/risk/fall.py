@@ -56,7 +56,8 @@ from executive.risk.fall_batch import (
 )
 from executive.risk.gaussian import McEstimate, normal_cdf, union_bounds
 from executive.risk.report import RiskReport
-from executive.scenario.types import RiskConfig, Uncertainty
+from executive.robot.posture import standing_pelvis_height
+from executive.schema.types import RiskConfig, Uncertainty
 from executive.world.model import World
 from executive.world.polygon import (
     check_polygon,
@@ -66,7 +67,6 @@ from executive.world.polygon import (
     polygon_area,
     signed_margin,
 )
-from executive.world.posture import standing_pelvis_height
 
 __all__ = [
     "ExternalForce",
@@ -488,7 +488,7 @@ def _posture_probability(
 class ExternalForce:
     """The force a hand exerts on the world at each knot (a push or a press); the robot feels its reaction.
 
-    ``force``: (K, 3) N in the world frame, what the hand applies (:attr:`executive.tasks.steps.Step.force`;
+    ``force``: (K, 3) N in the world frame, what the hand applies (:attr:`executive.planning.plan.Step.force`;
     zero rows where it applies none); ``point``: (K, 3) m, where it acts (the hand site).
     ``mass_sigma``, ``friction_sigma``: relative 1-sigma errors of the object's mass and friction;
     the force scales with their product (Coulomb: ``mu m g``), each factor floored at

@@ -23,7 +23,7 @@ import numpy as np
 from scipy import stats
 
 from executive.risk.combine import CombinedRisk, combine
-from executive.scenario.types import RiskConfig
+from executive.schema.types import RiskConfig
 
 __all__ = ["OBSERVED_AS", "Choice", "ModePosterior", "choice_confidence", "fuse", "posteriors"]
 

@@ -26,7 +26,7 @@ from executive.risk.gaussian import (
     union_bounds,
 )
 from executive.risk.report import RiskReport
-from executive.scenario.types import GraspRiskConfig, RiskConfig, Uncertainty
+from executive.schema.types import GraspRiskConfig, RiskConfig, Uncertainty
 from executive.world.model import World
 
 __all__ = [

@@ -61,7 +61,7 @@ from executive.planning.timing import Trajectory
 from executive.risk.gaussian import gauss_hermite_normal
 from executive.risk.grasp import half_extent
 from executive.risk.report import RiskReport
-from executive.scenario.types import RiskConfig, Uncertainty
+from executive.schema.types import RiskConfig, Uncertainty
 from executive.world.model import World
 
 __all__ = [
@@ -597,7 +597,7 @@ def hold_problem(world: World, plan: object, closing_s: float = 0.5) -> HoldProb
 
     Args:
         world: the estimate world the plan was made on.
-        plan: an :class:`executive.tasks.steps.AlternativePlan` (steps with kind, name, side;
+        plan: an :class:`executive.planning.plan.AlternativePlan` (steps with kind, name, side;
             trajectories by step name; task.object).
         closing_s: time a grasp's jaws take to close and settle (the Grasp behaviour's settle
             time), spent with the object at rest in the hands that already hold it.
@@ -608,7 +608,7 @@ def hold_problem(world: World, plan: object, closing_s: float = 0.5) -> HoldProb
     Raises:
         HoldModelUnavailable: a grasping hand is not a parallel jaw (see :func:`grip`).
     """
-    from executive.tasks.steps import held_at_start
+    from executive.planning.plan import held_at_start
 
     obj: str = plan.task.object  # type: ignore[attr-defined]
     body = world.ids.object_bodies[obj]
@@ -911,7 +911,7 @@ def assess_hold(world: World, plan: object, risk_config: RiskConfig, uncertainty
 
     Args:
         world: the estimate world the plan was made on (its object mass is the estimate).
-        plan: an :class:`executive.tasks.steps.AlternativePlan`.
+        plan: an :class:`executive.planning.plan.AlternativePlan`.
         risk_config: the scenario's risk settings (severity of a drop).
         uncertainty: the scenario's 1-sigma errors (object_mass, friction, object_position).
 

@@ -1,6 +1,6 @@
 """The reaction of a press on the robot, for the fall model.
 
-A press step (:class:`executive.tasks.steps.Step` of kind ``press``) carries in ``force`` what
+A press step (:class:`executive.planning.plan.Step` of kind ``press``) carries in ``force`` what
 the hand exerts on the panel (world frame, N); the robot feels the opposite at the hand, which
 moves its zero moment point (:func:`executive.risk.fall.zero_moment_points`). Unlike a push's,
 the force is commanded, not set by an object's mass and friction: it has no spread.
@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.planning.plan import AlternativePlan
 from executive.risk.fall import ExternalForce
-from executive.tasks.steps import AlternativePlan
 
 __all__ = ["press_forces"]
 

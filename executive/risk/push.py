@@ -1,6 +1,6 @@
 """Push risk: the force a push needs, what the arm makes of it, and what the robot feels.
 
-A push step (:class:`executive.tasks.steps.Step` with ``force``) slides an object by Coulomb
+A push step (:class:`executive.planning.plan.Step` with ``force``) slides an object by Coulomb
 friction: the hand must exert ``F = mu m g`` (:func:`executive.tasks.push.push_force`). The
 truth's mass and friction factors (``uncertainty.object_mass``, ``uncertainty.friction``, each
 ``max(0.2, 1 + s z)`` as the truth sampler draws them) scale it
@@ -37,18 +37,18 @@ from executive.planning.timing import Trajectory
 from executive.risk.fall import ExternalForce, force_scale_distribution
 from executive.risk.gaussian import normal_cdf
 from executive.risk.report import RiskReport
-from executive.scenario.types import RiskConfig, Uncertainty
+from executive.schema.types import RiskConfig, Uncertainty
 from executive.world.model import World
 
 
 class AlternativePlan(Protocol):
-    """What the push risk reads of a planned alternative (:class:`executive.tasks.steps.AlternativePlan`)."""
+    """What the push risk reads of a planned alternative (``planning.plan.AlternativePlan``)."""
 
     @property
     def name(self) -> str: ...
 
     @property
-    def steps(self) -> tuple[Any, ...]: ...  # executive.tasks.steps.Step: kind, side, force
+    def steps(self) -> tuple[Any, ...]: ...  # executive.planning.plan.Step: kind, side, force
 
     @property
     def trajectories(self) -> Mapping[str, Trajectory]: ...

@@ -40,10 +40,10 @@ import math
 from pathlib import Path
 
 from executive.errors import RobotProfileError
+from executive.robot.posture import SafePosture
 from executive.robot.profile_types import ArmProfile, FootProfile, GripperProfile, HandFrame, RobotProfile
-from executive.scenario import bundled as registry
-from executive.scenario.yaml_nodes import Node, check_model_file, load_yaml_file, load_yaml_text
-from executive.world.posture import SafePosture
+from executive.schema import catalog as registry
+from executive.schema.yaml_nodes import Node, check_model_file, load_yaml_file, load_yaml_text
 
 __all__ = ["SIDES", "load_bundled_profile", "load_profile", "loads_profile", "profile_from_node"]
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from executive.world.posture import SafePosture
+from executive.robot.posture import SafePosture
 
 __all__ = ["ArmProfile", "FootProfile", "GripperProfile", "HandFrame", "RobotProfile"]
 
@@ -86,7 +86,7 @@ class RobotProfile:
     # reach unloads a foot (the live guard measures the CoM 73 mm outside the foot contacts).
     return_along_lane: bool = False
     # The safe posture (pelvis drop, trunk tilt) the planner keeps to and the fall detector and
-    # fall model measure against (executive.world.posture).
+    # fall model measure against (executive.robot.posture).
     safe_posture: SafePosture = field(default_factory=SafePosture)
     # Alternatives this robot cannot do, by name, with the reason (e.g. {left_to_right: "..."}):
     # they are reported infeasible with that reason.

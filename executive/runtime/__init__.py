@@ -1,1 +1,1 @@
-"""Running a mission: the embeddable Executive and one-shot execution of a plan."""
+"""Running a mission: the embeddable Executive."""

@@ -6,7 +6,7 @@ worker thread, approvals are answered asynchronously); when the executive owns t
 physics (the default: a truth world sampled from the scenario's uncertainty, or
 equal to the estimate with ``truth="exact"``) it then steps the simulation one
 control period. A host that drives its own robot passes ``robot=`` (an object with
-the :class:`executive.robot.interface.RobotInterface` methods) and steps it itself;
+the :class:`executive.execution.robot_interface.RobotInterface` methods) and steps it itself;
 the MuJoCo estimate is then used for prediction only.
 
 Inspect ``status`` (py_trees status of the mission), ``pending_approval`` (the request
@@ -38,12 +38,12 @@ from behaviours.guard import install_monitor
 from behaviours.robot_access import install
 from executive.decision.approval import ApprovalChannel, ApprovalDecision, PendingApproval, make_channel
 from executive.decision.audit import AuditLog, now_iso, write_summary
+from executive.decision.physics_check import PhysicsCheck
 from executive.decision.selector import RiskSelector, task_label
+from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.detectors import FailureDetector
 from executive.monitoring.live_risk import LiveRiskMonitor
-from executive.risk.rollouts import PhysicsCheck
-from executive.robot.simulated import SimulatedRobot
-from executive.scenario.types import Scenario
+from executive.schema.types import Scenario
 from executive.world.model import World, build, sample_perturbation
 from executive.world.observation import SimulatedSensor, refresh
 
@@ -115,7 +115,7 @@ class Executive:
         scenario: a :class:`Scenario`, a scenario file, or a bundled scenario's name.
         approval: an approval channel, or a mode ``prompt|auto|deny`` (default: the
             scenario's ``approval.mode``; ``prompt`` only on a terminal, else ``deny``).
-        robot: the host's robot (see :mod:`executive.robot.interface`); None: the executive
+        robot: the host's robot (see :mod:`executive.execution.robot_interface`); None: the executive
             simulates the truth world itself and steps it in :meth:`tick`.
         truth: ``"exact"`` (truth = estimate) or a seed for the sampled truth (default
             ``trials.seed``); only without ``robot``. The seed (``trials.seed`` for ``"exact"``)

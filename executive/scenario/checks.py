@@ -12,7 +12,7 @@
 * a task between a pick and the place of the object it picked (not supported: the physics
   checks and the detectors follow one object in hand, that task's own).
 
-Types and ranges are the readers' job (:mod:`executive.scenario.scene`); this module assumes
+Types and ranges are the readers' job (:mod:`executive.schema.readers`); this module assumes
 they passed. It is called at the end of :func:`executive.scenario.load` and friends.
 """
 
@@ -26,9 +26,9 @@ import coal
 import numpy as np
 
 from executive.robot.model import RobotFacts
-from executive.scenario.scene import over_table, vertical_half_extent
-from executive.scenario.types import Body, Scenario, Table
-from executive.scenario.yaml_nodes import Node
+from executive.schema.readers import over_table, vertical_half_extent
+from executive.schema.types import Body, Scenario, Table
+from executive.schema.yaml_nodes import Node
 
 __all__ = ["OVERLAP_TOLERANCE", "REACH_SLACK", "REST_TOLERANCE", "check_scene"]
 

@@ -1,13 +1,13 @@
 """Load a scenario (YAML) into frozen dataclasses, validating every value.
 
 ``load("book_transfer")`` or ``load("path/to/file.yaml")`` returns a
-:class:`~executive.scenario.types.Scenario`. Every error is a
+:class:`~executive.schema.types.Scenario`. Every error is a
 :class:`~executive.errors.ScenarioError` whose message reads
 ``<file>: <key.path>: expected X, got Y``; unknown keys are rejected with the
 nearest valid name. Angles are degrees in the file and radians in the result.
 Relative paths (a robot's MJCF or profile) resolve against the scenario's folder.
 
-Beyond types, every number must lie in its range (:mod:`executive.scenario.ranges`), no
+Beyond types, every number must lie in its range (:mod:`executive.schema.ranges`), no
 setting may switch a safety check off (a negative ``risk.guard.min_com_margin``, a
 ``risk.threshold`` at or above the largest value its ordering can take:
 :func:`max_ordering_value`), ``severity.body_parts`` names a body-part label or a body of the
@@ -27,11 +27,11 @@ from typing import TypeVar
 from executive.robot.model import BODY_PART_LABELS, RobotFacts, robot_facts
 from executive.robot.profile import load_profile
 from executive.robot.profile_types import RobotProfile
-from executive.scenario import bundled as registry
-from executive.scenario import ranges as R
 from executive.scenario.checks import check_scene
-from executive.scenario.scene import read_scene
-from executive.scenario.types import (
+from executive.schema import catalog as registry
+from executive.schema import ranges as R
+from executive.schema.readers import read_scene
+from executive.schema.types import (
     ApprovalConfig,
     CollisionRiskConfig,
     FallRiskConfig,
@@ -47,7 +47,7 @@ from executive.scenario.types import (
     TrialsConfig,
     Uncertainty,
 )
-from executive.scenario.yaml_nodes import (
+from executive.schema.yaml_nodes import (
     Node,
     check_model_file,
     load_yaml_file,

@@ -14,41 +14,21 @@ the group ``executive.task_kinds``, or ``kind: package.module:Class`` in the YAM
 from __future__ import annotations
 
 import abc
-import dataclasses
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
+
+from executive.schema.types import Task
 
 if TYPE_CHECKING:
     import py_trees
 
     from executive.monitoring.detectors import FailureDetector
-    from executive.scenario.types import SceneConfig
-    from executive.scenario.yaml_nodes import Node
-    from executive.tasks.steps import AlternativePlan, CompositionConfig, Step
+    from executive.planning.plan import AlternativePlan, CompositionConfig, Step
+    from executive.schema.types import SceneConfig
+    from executive.schema.yaml_nodes import Node
     from executive.world.model import World
 
 __all__ = ["Alternative", "Task", "TaskKind", "Verdict"]
-
-
-@dataclass(frozen=True, kw_only=True)
-class Task:
-    """One task of a mission. Subclasses are frozen dataclasses with their kind's fields.
-
-    ``object``: the scene object the task acts on ("" for none, e.g. a press);
-    ``alternatives``: the names the scenario allows (empty: every alternative the kind offers).
-    """
-
-    kind: ClassVar[str] = ""
-    object: str
-    alternatives: tuple[str, ...] = ()
-
-    def label(self) -> str:
-        """One line for logs and tables, e.g. ``transfer book to (0.52, -0.26)``."""
-        return f"{self.kind} {self.object}".strip()
-
-    def restricted(self, names: tuple[str, ...]) -> Task:
-        """The same task allowing only ``names`` (a re-plan without the alternatives tried)."""
-        return dataclasses.replace(self, alternatives=names)
 
 
 @dataclass(frozen=True)
@@ -105,7 +85,7 @@ class TaskKind(abc.ABC):
 
     def read_alternatives(self, node: Node, default: tuple[str, ...] = ()) -> tuple[str, ...]:
         """The block's optional ``alternatives`` (of :attr:`alternative_names`), else ``default``."""
-        from executive.scenario.scene import read_alternatives
+        from executive.schema.readers import read_alternatives
 
         found = node.opt("alternatives")
         return read_alternatives(found, self.alternative_names) if found is not None else default

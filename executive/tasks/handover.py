@@ -15,10 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import PlanningError
 from executive.tasks.hands import UP, HandFrames, yaw_of
 from executive.tasks.phases import grasp_height, pick, place
-from executive.tasks.steps import CompositionConfig, Step
 from executive.world.model import World
 
 __all__ = ["Exchange", "exchange", "transfer"]

@@ -11,9 +11,9 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from executive.scenario.types import Body, SceneConfig
+from executive.planning.plan import CompositionConfig, Step
+from executive.schema.types import Body, SceneConfig
 from executive.tasks.hands import UP, HandFrames
-from executive.tasks.steps import CompositionConfig, Step
 
 __all__ = ["carry_lane_front", "grasp_height", "lane_carry", "one_hand_leg", "pick", "place"]
 
@@ -115,9 +115,15 @@ def lane_carry(
     points: tuple[FloatArray, FloatArray],
     carry_yaw: float,
     grasp_yaw: float,
+    exit_yaw: float | None = None,
 ) -> list[Step]:
-    """Back to the lane, then across the body in it (the object skirting what is in the way)."""
+    """Back to the lane, then across the body in it (the object skirting what is in the way).
+
+    The object is at ``carry_yaw`` on reaching the lane and at ``exit_yaw`` (default the same) at
+    its end: a large turn is shared between the two moves.
+    """
     lane_in, lane_out = points
+    out_yaw = carry_yaw if exit_yaw is None else exit_yaw
     carried = (side, obj)
     return [
         Step(
@@ -131,7 +137,7 @@ def lane_carry(
             "carry",
             f"{side}.transfer",
             side,
-            (h.target(side, lane_out, carry_yaw, grasp_yaw),),
+            (h.target(side, lane_out, out_yaw, grasp_yaw),),
             carried=carried,
         ),
     ]

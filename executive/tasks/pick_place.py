@@ -10,19 +10,20 @@ its one); a place supports only the hand that holds the object, and says which o
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import PlanningError
-from executive.scenario.types import Body, SceneConfig
-from executive.scenario.yaml_nodes import Node
+from executive.schema.types import Body, SceneConfig
+from executive.schema.yaml_nodes import Node
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict
 from executive.tasks.hands import UP, HandFrames, yaw_of
 from executive.tasks.phases import carry_lane_front, grasp_height, lane_carry, pick, place
-from executive.tasks.steps import CompositionConfig, Step
 from executive.tasks.transfer import ONE_HAND, placed_verdict, target_placement
 from executive.world.model import World
 
@@ -34,6 +35,8 @@ FloatArray = NDArray[np.float64]
 MIN_CONTACTS, MIN_FORCE = 2, 10.0
 #: A lane point closer than this (m) to where the hand already is is no motion: it is left out.
 SAME_POINT = 0.01
+#: A held object further than this (rad) from its place yaw is turned before the lane carry.
+TURN_FIRST = np.radians(45.0)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -79,7 +82,7 @@ class PickKind(TaskKind):
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``pick: {object, alternatives: [left, right]}``."""
-        from executive.scenario.scene import read_object
+        from executive.schema.readers import read_object
 
         node.check_keys(("object",), ("alternatives",))
         return PickTask(object=read_object(node, scene), alternatives=self.read_alternatives(node, ONE_HAND))
@@ -173,7 +176,7 @@ class PlaceKind(TaskKind):
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``place: {object, to: [x, y(, z)], to_yaw (deg), alternatives}``."""
-        from executive.scenario.scene import read_target
+        from executive.schema.readers import read_target
 
         node.check_keys(("object", "to"), ("to_yaw", "alternatives"))
         name, to, yaw = read_target(node, scene)
@@ -228,6 +231,24 @@ def site_offset(world: World, obj: str, cfg: CompositionConfig) -> FloatArray:
     return np.asarray(-to_object.reshape(3, 3) @ rel.reshape(3, 3).T @ grip.position, dtype=float)
 
 
+def natural_place_yaw(h: HandFrames, side: str, held_yaw: float, place_yaw: float, symmetry: int) -> float:
+    """Of the yaws equivalent to ``place_yaw`` (``symmetry`` turns), the one the wrist turns to naturally.
+
+    A hand turns a held object with itself. Among the equivalent place yaws, take the one whose
+    closing direction is nearest the hand's preferred one for an object at that yaw (its
+    profile's ``closing_yaw``, else its home pose's): a wrist turned half a turn from that
+    cannot reach as far (a handover leaves the giver's wrist a quarter turn from natural).
+    """
+    grasp_closing = h.closing_near_home(side, held_yaw)
+
+    def strain(yaw: float) -> float:
+        closing = grasp_closing + (yaw - held_yaw)
+        return abs(float(np.remainder(closing - h.closing_near_home(side, yaw) + np.pi, 2 * np.pi) - np.pi))
+
+    n = max(1, symmetry)
+    return min((place_yaw + 2 * np.pi * k / n for k in range(n)), key=strain)
+
+
 def place_steps(world: World, task: PlaceTask, side: str, cfg: CompositionConfig) -> list[Step]:
     """From the hold: to the lane in front of what is in the way, across, then put it down, home.
 
@@ -242,21 +263,30 @@ def place_steps(world: World, task: PlaceTask, side: str, cfg: CompositionConfig
     offset = site_offset(world, task.object, cfg)
     site = pos + offset
     target = target_placement(world, body, task.to, task.to_yaw_rad, float(offset[2]))
+    target = dataclasses.replace(target, yaw=natural_place_yaw(h, side, yaw, target.yaw, body.yaw_symmetry))
     turn = target.yaw - yaw
     c, s = np.cos(turn), np.sin(turn)
     place_at = target.centre + np.array(
         [c * offset[0] - s * offset[1], s * offset[0] + c * offset[1], offset[2]]
     )
-    carry_z = max(site[2], place_at[2] + cfg.approach_height)
+    # Carried at the height a one-hand transfer carries (lift height over the place), or lower
+    # if it is held lower: a hand held high (at a handover) reaches less far across the body.
+    carry_z = max(min(site[2], place_at[2] + cfg.lift_height), place_at[2] + cfg.approach_height)
     half = _length(body) / 2
     front = carry_lane_front(
         world.scenario.scene, (pos[1], target.centre[1]), half + cfg.obstacle_clearance, h.base[0], pos[0]
     )
-    lane_x = min(front - cfg.obstacle_clearance - half, site[0], place_at[0])
+    lane_x = min(front - cfg.obstacle_clearance - half, place_at[0])
     lane = (np.array([lane_x, site[1], carry_z]), np.array([lane_x, place_at[1], carry_z]))
     carry, at = [], site
+    # Far from its place yaw (as a handover leaves it, across the body), it turns on the way to
+    # the lane; else half way there.
+    far = abs(float(np.remainder(target.yaw - yaw + np.pi, 2 * np.pi) - np.pi)) > TURN_FIRST
+    carry_yaw = (yaw + target.yaw) / 2
     for step, point in zip(
-        lane_carry(h, side, task.object, lane, (yaw + target.yaw) / 2, yaw), lane, strict=True
+        lane_carry(h, side, task.object, lane, carry_yaw, yaw, target.yaw if far else None),
+        lane,
+        strict=True,
     ):
         if np.linalg.norm(point - at) > SAME_POINT:
             carry.append(step)

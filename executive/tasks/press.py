@@ -9,7 +9,7 @@ on a face that looks down; ``force`` (N, (0, 100]) is pushed into the surface al
 Alternatives (names stable): ``left``, ``right``, the pressing hand. Each lays out: over the point
 along the face's normal (``approach_height`` off), in to :attr:`PressKind.standoff` off the surface,
 the press (a step of kind ``press`` whose target is beyond the surface by the depth at which the
-arm's position servos push with ``force``, :func:`executive.tasks.press_geometry.press_compliance`;
+arm's position servos push with ``force``, :func:`executive.planning.press_geometry.press_compliance`;
 its ``force`` is the force the hand exerts on the panel, its ``hold_s`` the duration), back out
 over the point, home. The press's behaviour (:class:`behaviours.press.Press`) measures the contact
 force and closes the loop on it.
@@ -24,18 +24,18 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 import py_trees
 
+from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import HandTarget, PlanningError
-from executive.scenario import ranges as R
-from executive.scenario.types import SceneConfig
-from executive.scenario.yaml_nodes import Node
+from executive.planning.press_geometry import hand_lead, press_compliance, press_quat, surface_at
+from executive.schema import ranges as R
+from executive.schema.types import SceneConfig
+from executive.schema.yaml_nodes import Node
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict
 from executive.tasks.hands import HandFrames
-from executive.tasks.press_geometry import hand_lead, press_compliance, press_quat, surface_at
-from executive.tasks.steps import CompositionConfig, Step
 from executive.world.model import World
 
 if TYPE_CHECKING:
-    from executive.tasks.steps import AlternativePlan
+    from executive.planning.plan import AlternativePlan
 
 __all__ = [
     "FORCE_MAX",

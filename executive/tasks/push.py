@@ -25,14 +25,14 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import PlanningError
 from executive.risk.push import CONTACT_GAP, descent_gap
-from executive.scenario.types import Body, SceneConfig
-from executive.scenario.yaml_nodes import Node
+from executive.schema.types import Body, SceneConfig
+from executive.schema.yaml_nodes import Node
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict
 from executive.tasks.grasp_geometry import hand_geometry
 from executive.tasks.hands import UP, HandFrames
-from executive.tasks.steps import CompositionConfig, Step
 from executive.world.model import World
 
 __all__ = [
@@ -76,8 +76,8 @@ class PushKind(TaskKind):
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``push: {object, to: [x, y], alternatives}``; errors name the key path."""
-        from executive.scenario import ranges as R
-        from executive.scenario.scene import over_table, read_object
+        from executive.schema import ranges as R
+        from executive.schema.readers import over_table, read_object
 
         node.check_keys(("object", "to"), ("alternatives",))
         name = read_object(node, scene)
@@ -214,7 +214,7 @@ def push_line(world: World, task: PushTask, side: str) -> PushLine:
         PlanningError: the object is at the target already, rests on something other than the
             table, is too low for the fingertips, or would tip over instead of sliding.
     """
-    from executive.scenario.scene import vertical_half_extent
+    from executive.schema.readers import vertical_half_extent
 
     body = _body(world, task.object)
     pos, quat = world.object_pose(task.object)

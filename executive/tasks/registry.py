@@ -16,7 +16,7 @@ import inspect
 from importlib import metadata
 
 from executive.errors import ExecutiveError
-from executive.scenario.yaml_nodes import unknown_name
+from executive.schema.yaml_nodes import unknown_name
 from executive.tasks.base import TaskKind
 
 __all__ = ["ENTRY_POINT_GROUP", "TaskKindError", "available", "get", "register", "resolve"]

@@ -18,12 +18,12 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import PlanningError
-from executive.scenario.scene import over_table
-from executive.scenario.types import Body
+from executive.schema.readers import over_table
+from executive.schema.types import Body
 from executive.tasks.hands import HandFrames, yaw_of
 from executive.tasks.phases import one_hand_leg
-from executive.tasks.steps import CompositionConfig, Step
 from executive.world.model import World
 
 __all__ = ["REGRASPS", "Spot", "midway_spot", "transfer"]

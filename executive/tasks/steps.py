@@ -1,96 +1,28 @@
-"""Steps, planned alternatives and their subtrees: what every task kind builds on.
+"""Planning a task's alternative step after step, and building its behaviour subtree.
 
-A task kind lays an alternative out as a list of :class:`Step` values (hand targets
-computed from the *estimate* of the scene); :func:`plan_alternative` plans them one
-after another with the whole-body planner into an :class:`AlternativePlan`, and
-:func:`build_subtree` turns that into a py_trees Sequence (a handover is its own
-subtree; every motion may be wrapped in a live risk guard).
+:func:`plan_alternative` asks the task's kind for the alternative's steps
+(:class:`executive.planning.plan.Step`), checks their grasps, and plans them one
+after another with the whole-body planner into an
+:class:`executive.planning.plan.AlternativePlan`; :func:`build_subtree` turns that
+into a py_trees Sequence (a handover is its own subtree; every motion may be
+wrapped in a live risk guard).
 """
 
 from __future__ import annotations
-
-from dataclasses import dataclass, field
-from typing import Literal
 
 import numpy as np
 import py_trees
 from numpy.typing import NDArray
 
-from executive.planning.planner import HandTarget, Planner, Trajectory
+from executive.planning.plan import AlternativePlan, CompositionConfig, Step
+from executive.planning.planner import Planner, Trajectory
 from executive.tasks.base import Task
 from executive.tasks.grasp_geometry import check_grasp
 from executive.world.model import World
 
-__all__ = [
-    "AlternativePlan",
-    "CompositionConfig",
-    "Step",
-    "StepKind",
-    "build_subtree",
-    "check_grasps",
-    "held_at_start",
-    "plan_alternative",
-]
+__all__ = ["build_subtree", "check_grasps", "plan_alternative"]
 
 FloatArray = NDArray[np.float64]
-StepKind = Literal["move", "lift", "carry", "place", "retreat", "home", "grasp", "release", "push", "press"]
-
-
-@dataclass(frozen=True)
-class CompositionConfig:
-    """Geometry of the waypoints (metres)."""
-
-    approach_height: float = 0.10  # pre-grasp / pre-place above the grasp pose
-    lift_height: float = 0.12  # lift above the grasp pose
-    grip_depth: float = 0.01  # hand site below the object's top face
-    handover_offset: float = 0.06  # grasp points either side of the object's centre
-    handover_point: tuple[float, float] = (0.30, 0.0)  # object centre x y at the handover
-    handover_height: float = 0.20  # object centre above the table top at the handover
-    giver_end: int = -1  # the end of the object's x axis the giver grasps (+1 or -1)
-    turn_point: tuple[float, float] | None = None  # object centre x y after the receiver's turn
-    receiver_turn_steps: int = 1  # the receiver's turn to the place yaw, in this many moves
-    giver_turn_steps: int = 1  # the giver's quarter turn to the handover, in this many moves
-    handover_side: float = 0.10  # the receiver rises this far out on its side of the handover
-    obstacle_clearance: float = 0.07  # how close a one-arm carry skirts the obstacles' front
-
-
-@dataclass(frozen=True)
-class Step:
-    """One step of an alternative: a motion of one hand (with the others' targets held) or a gripper action.
-
-    ``carried``: (side, object) moved with that hand during the motion; ``allow_contact``: bodies the
-    hand may touch; ``obj``: the object a grasp/release acts on (a home step: the one it keeps clear of);
-    ``force``: the force (N, world frame) the hand exerts on the environment during a push or a press
-    (the robot feels its reaction); ``hold_s``: how long a press keeps that force.
-    """
-
-    kind: StepKind
-    name: str
-    side: str
-    targets: tuple[HandTarget, ...] = ()
-    carried: tuple[str, str] | None = None
-    allow_contact: tuple[str, ...] = ()
-    obj: str = ""
-    force: tuple[float, float, float] | None = None
-    hold_s: float = 0.0
-
-
-@dataclass(frozen=True)
-class AlternativePlan:
-    """An alternative planned on the estimate: its steps and one trajectory per motion step."""
-
-    name: str
-    task: Task
-    steps: tuple[Step, ...]
-    trajectories: dict[str, Trajectory] = field(default_factory=dict)
-
-    @property
-    def duration(self) -> float:
-        """Seconds as planned: the motions' and the holds of steps that keep a force (a press)."""
-        return sum(t.duration for t in self.trajectories.values()) + sum(s.hold_s for s in self.steps)
-
-    def ordered_trajectories(self) -> list[Trajectory]:
-        return [self.trajectories[s.name] for s in self.steps if s.name in self.trajectories]
 
 
 def plan_alternative(
@@ -129,22 +61,6 @@ def plan_alternative(
         trajectories[step.name] = traj
         q = traj.qpos[-1]
     return AlternativePlan(alternative, task, tuple(steps), trajectories)
-
-
-def held_at_start(steps: tuple[Step, ...] | list[Step]) -> dict[str, str]:
-    """The objects the hands hold when an alternative starts: side -> object.
-
-    A hand holds an object from the start when it carries it in a motion before any grasp of
-    that hand (a ``place`` after a ``pick``); a push moves its object without holding it.
-    """
-    held: dict[str, str] = {}
-    grasped: set[str] = set()
-    for step in steps:
-        if step.kind == "grasp":
-            grasped.add(step.side)
-        elif step.carried is not None and step.kind != "push" and step.carried[0] not in grasped:
-            held.setdefault(step.carried[0], step.carried[1])
-    return held
 
 
 def check_grasps(world: World, steps: list[Step], table_clearance: float, grip_depth: float) -> None:

@@ -13,23 +13,26 @@ Alternatives (names stable; Long et al. 2018, section "Total risk"):
   (``TransferKind.default_alternatives``): it plans two one-arm legs, so ask for it by name.
 
 A one-arm robot offers its one hand; a robot's profile may declare any of them unsupported.
+An object already in a hand (a re-plan after a failed handover) is put down by that hand
+(``left`` or ``right``: lane carry and place from where it is); the others are then unsupported.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
+import mujoco
 import numpy as np
 
-from executive.planning.planner import PlanningError
-from executive.scenario.types import Body, SceneConfig
-from executive.scenario.yaml_nodes import Node
+from executive.planning.plan import CompositionConfig, Step
+from executive.planning.planner import HandTarget, PlanningError
+from executive.schema.types import Body, SceneConfig
+from executive.schema.yaml_nodes import Node
 from executive.tasks import handover as handover_steps
 from executive.tasks import regrasp as regrasp_steps
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict
 from executive.tasks.hands import HandFrames, yaw_of
 from executive.tasks.phases import one_hand_leg
-from executive.tasks.steps import CompositionConfig, Step
 from executive.world.model import World
 
 __all__ = ["HANDOVERS", "ONE_HAND", "REGRASPS", "TransferKind", "TransferTask", "transfer_steps"]
@@ -86,7 +89,7 @@ class TransferKind(TaskKind):
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``transfer: {object, to: [x, y(, z)], to_yaw (deg), alternatives}``."""
-        from executive.scenario.scene import read_target
+        from executive.schema.readers import read_target
 
         node.check_keys(("object", "to"), ("to_yaw", "alternatives"))
         name, to, yaw = read_target(node, scene)
@@ -104,10 +107,24 @@ class TransferKind(TaskKind):
             missing = [s for s in HANDOVERS_SIDES.get(name) or regrasp_steps.REGRASPS[name] if s not in sides]
             reason = f"robot '{world.profile.name}' has no {' and no '.join(missing)} arm" if missing else ""
             out.append(Alternative(name, reason))
-        return out
+        holder = world.held_by(task.object)
+        if holder is None:
+            return out
+        # Already in a hand (a re-plan after a failed handover, say): that hand puts it down.
+        held = f"'{task.object}' is in the {holder} hand: only '{holder}' starts there (placing it)"
+        return [a if a.name == holder or a.unsupported else Alternative(a.name, held) for a in out]
 
     def steps(self, task: Task, world: World, alternative: str, config: CompositionConfig) -> list[Step]:
         assert isinstance(task, TransferTask)
+        if world.held_by(task.object) == alternative:
+            from executive.tasks.pick_place import PlaceTask, place_steps
+
+            # No yaw asked: the yaw it had in the scene (not the one the hand has turned it to).
+            body = next(b for b in world.scenario.scene.objects if b.name == task.object)
+            yaw = task.to_yaw_rad if task.to_yaw_rad is not None else body.orientation_rad[2]
+            place = PlaceTask(object=task.object, to=task.to, to_yaw_rad=yaw)
+            clear = others_home(world, task.object, alternative, config)
+            return [*clear, *place_steps(world, place, alternative, config)]
         if alternative in ONE_HAND:
             return one_hand_steps(world, task, alternative, config)
         if alternative in HANDOVERS:
@@ -154,6 +171,31 @@ def one_hand_steps(world: World, task: TransferTask, side: str, cfg: Composition
     pos, quat = world.object_pose(task.object)
     target = target_placement(world, body, task.to, task.to_yaw_rad, 0.0)
     return one_hand_leg(HandFrames(world), side, body, (pos, yaw_of(quat)), (target.centre, target.yaw), cfg)
+
+
+def others_home(world: World, obj: str, holder: str, cfg: CompositionConfig) -> list[Step]:
+    """The other hands home first, ``holder`` keeping ``obj`` where it is (they may brush it leaving).
+
+    After a failed handover the receiver's open hand is still at the object.
+    """
+    from executive.tasks.pick_place import site_offset
+
+    h = HandFrames(world)
+    pos, quat = world.object_pose(obj)
+    grip = world.grips.get(obj)
+    site_q = np.zeros(4)
+    if grip is not None and grip.looks:  # object = site * grip, so site = object * grip^-1
+        inverse = np.zeros(4)
+        mujoco.mju_negQuat(inverse, np.asarray(grip.quat, dtype=float))
+        mujoco.mju_mulQuat(site_q, quat, inverse)
+    else:
+        site_q = h.target(holder, pos, yaw_of(quat)).quat
+    hold = HandTarget(holder, pos + site_offset(world, obj, cfg), site_q)
+    return [
+        Step("home", f"{side}.clear", side, (h.home[side], hold), carried=(holder, obj), allow_contact=(obj,))
+        for side in world.profile.sides
+        if side != holder
+    ]
 
 
 def transfer_steps(

@@ -22,7 +22,6 @@ import os
 import pickle
 import signal
 import time
-import traceback
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -32,12 +31,11 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.errors import ExecutiveError
-from executive.scenario.types import Scenario, SceneVariation
+from executive.schema.types import Scenario, SceneVariation
 from executive.world.model import Perturbation
 
 if TYPE_CHECKING:
-    from executive.risk.rollouts import RolloutJob
-    from executive.runtime.runner import RunResult
+    from executive.decision.physics_check import RolloutJob
 
 __all__ = [
     "FAILURE_MODES",
@@ -46,8 +44,6 @@ __all__ = [
     "Prediction",
     "TrialLog",
     "check_predictions",
-    "error_fields",
-    "outcome_fields",
     "predict",
     "read_trials",
     "run_campaign",
@@ -111,13 +107,13 @@ def check_predictions(
     run_map: Callable[[Sequence[RolloutJob]], list[dict[str, Any]]],
     log: Callable[[str], Any] = print,
 ) -> dict[str, Prediction]:
-    """The predictions after the physics check (:mod:`executive.risk.rollouts`) on the estimate.
+    """The predictions after the physics check (:mod:`executive.decision.physics_check`) on the estimate.
 
     A fused alternative carries the fused risk and value. One whose dry run failed keeps its
     analytic risk but has no value (the executive would never run it); its trials still run,
     so the campaign measures it all the same.
     """
-    from executive.risk.rollouts import check_alternatives
+    from executive.decision.physics_check import check_alternatives
 
     feasible = {n: p for n, p in predictions.items() if p.feasible and p.assessed is not None}
     if not feasible:
@@ -242,7 +238,7 @@ def run_trial(
     alternative (planning is deterministic: planning again per trial gives the same plan);
     None: plan it here, on the trial's own scene, as a scenario with a scene variation needs.
     """
-    from executive.runtime.runner import execute_plan
+    from executive.execution.runner import error_fields, execute_plan, outcome_fields
     from executive.world.model import build
 
     estimate, perturbation, shifts = trial_scene(scenario, seed)
@@ -271,41 +267,6 @@ def run_trial(
         return record
     record.update(outcome_fields(result))
     return record
-
-
-def error_fields(exc: BaseException) -> dict[str, Any]:
-    """The record of a physics run whose code raised (a defect, counted as outcome ``error``)."""
-    last = traceback.extract_tb(exc.__traceback__)[-1]
-    detail = f"{type(exc).__name__}: {exc} ({Path(last.filename).name}:{last.lineno})"
-    return {"outcome": "error", "failure": {"mode": "error", "detail": detail}}
-
-
-def outcome_fields(result: RunResult) -> dict[str, Any]:
-    """What a physics run's record says of its outcome: outcome, failure, sim time, placement error.
-
-    ``outcome`` is ``success``, ``timeout`` or the failure detector's mode (``unstable`` when
-    the run failed without a detector verdict).
-    """
-    out: dict[str, Any] = {"sim_time_s": round(result.sim_time_s, 6)}
-    if result.placement_error_m is not None:
-        out["placement_error_m"] = round(result.placement_error_m, 6)
-    if result.outcome == "success":
-        out["outcome"] = "success"
-    elif result.outcome == "timeout":
-        out["outcome"] = "timeout"
-        out["failure"] = {"mode": "timeout", "detail": result.message}
-    else:
-        failure = result.failure
-        mode = failure.mode if failure is not None else "unstable"
-        out["outcome"] = mode
-        out["failure"] = {
-            "mode": mode,
-            "detail": failure.detail if failure is not None else result.message,
-            "time": round(failure.time, 6) if failure is not None else None,
-            "bodies": list(failure.bodies) if failure is not None else [],
-            "force": round(failure.force, 3) if failure is not None else 0.0,
-        }
-    return out
 
 
 def _predicted(prediction: Prediction) -> dict[str, Any] | None:
@@ -499,7 +460,7 @@ class _Runner:
 
     def run_jobs(self, jobs: Sequence[RolloutJob]) -> list[dict[str, Any]]:
         """Physics jobs (dry runs, rollouts) on the campaign's backend, records in order."""
-        from executive.risk.rollouts import run_job
+        from executive.decision.physics_check import run_job
 
         if self._ray is not None:
             remote = self._ray.remote(run_job)
@@ -1045,7 +1006,7 @@ def _execute(
     """Predict the alternatives (unless the scene varies) and run the trials ``specs``, each
     appended to ``records`` and to trials.jsonl as it ends, with a progress bar. Ctrl-C stops
     the workers; every finished trial is already on disk."""
-    from executive.cli.progress_bar import ProgressBar
+    from executive.report.progress_bar import ProgressBar
 
     t0 = time.perf_counter()
     runner = _Runner(scenario, task_index, jobs, backend, folder)

@@ -38,7 +38,7 @@ import numpy as np
 
 from executive.decision.audit import atomic_write_text, read_resume_settings
 from executive.errors import ExecutiveError
-from executive.scenario.types import Scenario
+from executive.schema.types import Scenario
 
 if TYPE_CHECKING:
     from executive.validation.variants import Variant
@@ -186,8 +186,8 @@ def _run_variants(
     log: Callable[[str], None],
 ) -> FidelityResult:
     """Draw, write and run each variant's campaign; then the suite's statistics."""
-    from executive.cli.progress_bar import format_duration
-    from executive.risk.rollouts import with_rollouts
+    from executive.decision.physics_check import with_rollouts
+    from executive.report.progress_bar import format_duration
     from executive.validation.campaign import run_campaign
     from executive.validation.variants import make_variant, write_variant
 

@@ -39,8 +39,8 @@ import yaml
 from numpy.typing import NDArray
 
 from executive.errors import ExecutiveError, ScenarioError
-from executive.scenario.scene import TOLERANCE, over_table, vertical_half_extent
-from executive.scenario.types import Body, Scenario, SceneConfig, Table
+from executive.schema.readers import TOLERANCE, over_table, vertical_half_extent
+from executive.schema.types import Body, Scenario, SceneConfig, Table
 from executive.tasks.transfer import TransferTask
 
 __all__ = [
@@ -92,7 +92,7 @@ def base_document(scenario: Scenario) -> dict[str, Any]:
     Raises:
         ExecutiveError: the scenario was not loaded from a file.
     """
-    from executive.scenario.yaml_nodes import load_yaml_file
+    from executive.schema.yaml_nodes import load_yaml_file
 
     if scenario.source is None or not Path(scenario.source).is_file():
         raise ExecutiveError(f"scenario {scenario.name} has no YAML file to vary")

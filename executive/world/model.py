@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 from executive.errors import WorldError
 from executive.robot.profile import load_profile
 from executive.robot.profile_types import RobotProfile
-from executive.scenario.types import Body, Scenario
+from executive.schema.types import Body, Scenario
 
 __all__ = [
     "Grip",

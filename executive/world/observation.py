@@ -23,7 +23,7 @@ else the contacts of its MuJoCo state, :func:`executive.world.touch.hand_contact
 
 Sources: the bundled physics observes through a :class:`SimulatedSensor` (the truth world's
 poses with Gaussian noise of the scenario's ``uncertainty``); a host's robot supplies its own
-poses (:class:`executive.robot.interface.HostRobot`, ``JointState.objects``). A robot with no
+poses (:class:`executive.execution.robot_interface.HostRobot`, ``JointState.objects``). A robot with no
 ``observe_objects()`` sees nothing: only the held objects move (with the hands).
 """
 

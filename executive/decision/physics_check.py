@@ -2,7 +2,7 @@
 
 Every feasible alternative is first *dry-run*: executed once in MuJoCo on the estimate itself
 (truth = estimate), through the same subtree, servos and failure detectors as a real run
-(:func:`executive.runtime.runner.execute_plan`). A plan that fails with perfect knowledge is
+(:func:`executive.execution.runner.execute_plan`). A plan that fails with perfect knowledge is
 infeasible. Then, when ``risk.rollouts.count`` > 0, *rollouts*: the surviving alternatives
 executed on truths sampled from the scenario's uncertainty (the campaign's sampler), in rounds
 of ``batch`` per alternative, until the stopping rule of :mod:`executive.risk.fusion` calls
@@ -33,11 +33,11 @@ import numpy as np
 from executive.errors import ExecutiveError
 from executive.risk.combine import CombinedRisk
 from executive.risk.fusion import choice_confidence, fuse, posteriors
-from executive.scenario.types import RiskConfig, Scenario, SceneVariation
+from executive.schema.types import RiskConfig, Scenario, SceneVariation
 
 if TYPE_CHECKING:
     from executive.decision.assessment import AlternativeRisk
-    from executive.tasks.steps import AlternativePlan
+    from executive.planning.plan import AlternativePlan
     from executive.world.model import World
 
 __all__ = [
@@ -121,7 +121,7 @@ def with_rollouts(scenario: Scenario, count: int | None) -> Scenario:
 
 
 def _truth(job: RolloutJob) -> World:
-    from executive.tasks.steps import held_at_start
+    from executive.planning.plan import held_at_start
     from executive.world.model import build, sample_perturbation
 
     if job.seed is None:
@@ -148,8 +148,7 @@ def run_job(job: RolloutJob) -> dict[str, Any]:
     ``outcome`` is ``success``, a failure detector's mode, ``timeout``, or ``error`` (the code
     raised: a defect, counted, never hidden).
     """
-    from executive.runtime.runner import execute_plan
-    from executive.validation.campaign import error_fields, outcome_fields
+    from executive.execution.runner import error_fields, execute_plan, outcome_fields
 
     t0 = time.perf_counter()
     record: dict[str, Any] = {"alternative": job.plan.name, "seed": job.seed, "failure": None}

@@ -3,7 +3,7 @@
 Behaviours use a robot through a small surface (:class:`RobotInterface`): the
 time, a MuJoCo ``world``/``data`` holding the robot's *current* state (for hand
 positions, contacts and the detectors), joint targets, the gripper, a safe hold.
-:class:`executive.robot.simulated.SimulatedRobot` is that surface over the bundled
+:class:`executive.execution.simulated.SimulatedRobot` is that surface over the bundled
 physics. For a host's own robot, :class:`HostRobot` builds it from an even
 smaller protocol the host implements, :class:`JointIO`: read the joint state and
 base pose (and, if the robot perceives them, object poses), send joint targets

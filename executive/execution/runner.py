@@ -8,23 +8,33 @@ time limit passes. Risk-based selection between alternatives builds on it.
 from __future__ import annotations
 
 import time
+import traceback
 from dataclasses import dataclass, field
-from typing import cast, get_args
+from pathlib import Path
+from typing import Any, cast, get_args
 
 import numpy as np
 import py_trees
 
 from behaviours.robot_access import NAMESPACE, install
+from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.detectors import Failure, FailureDetector, FailureMode
+from executive.planning.plan import AlternativePlan, held_at_start
 from executive.planning.planner import Planner, PlanningError
-from executive.robot.simulated import SimulatedRobot
-from executive.scenario.types import Scenario
+from executive.schema.types import Scenario
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
-from executive.tasks.steps import AlternativePlan, held_at_start, plan_alternative
+from executive.tasks.steps import plan_alternative
 from executive.world.model import World, build, sample_perturbation
 
-__all__ = ["RunResult", "behaviour_failure", "execute_plan", "run_alternative"]
+__all__ = [
+    "RunResult",
+    "behaviour_failure",
+    "error_fields",
+    "execute_plan",
+    "outcome_fields",
+    "run_alternative",
+]
 
 Status = py_trees.common.Status
 
@@ -180,3 +190,38 @@ def run_alternative(
     result = execute_plan(plan, truth, task, control_dt=control_dt)
     result.plan_s = plan_s
     return result
+
+
+def error_fields(exc: BaseException) -> dict[str, Any]:
+    """The record of a physics run whose code raised (a defect, counted as outcome ``error``)."""
+    last = traceback.extract_tb(exc.__traceback__)[-1]
+    detail = f"{type(exc).__name__}: {exc} ({Path(last.filename).name}:{last.lineno})"
+    return {"outcome": "error", "failure": {"mode": "error", "detail": detail}}
+
+
+def outcome_fields(result: RunResult) -> dict[str, Any]:
+    """What a physics run's record says of its outcome: outcome, failure, sim time, placement error.
+
+    ``outcome`` is ``success``, ``timeout`` or the failure detector's mode (``unstable`` when
+    the run failed without a detector verdict).
+    """
+    out: dict[str, Any] = {"sim_time_s": round(result.sim_time_s, 6)}
+    if result.placement_error_m is not None:
+        out["placement_error_m"] = round(result.placement_error_m, 6)
+    if result.outcome == "success":
+        out["outcome"] = "success"
+    elif result.outcome == "timeout":
+        out["outcome"] = "timeout"
+        out["failure"] = {"mode": "timeout", "detail": result.message}
+    else:
+        failure = result.failure
+        mode = failure.mode if failure is not None else "unstable"
+        out["outcome"] = mode
+        out["failure"] = {
+            "mode": mode,
+            "detail": failure.detail if failure is not None else result.message,
+            "time": round(failure.time, 6) if failure is not None else None,
+            "bodies": list(failure.bodies) if failure is not None else [],
+            "force": round(failure.force, 3) if failure is not None else 0.0,
+        }
+    return out

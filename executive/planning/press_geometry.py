@@ -18,7 +18,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from executive.scenario.types import Body
+from executive.schema.types import Body
 from executive.world.model import World
 
 __all__ = ["Surface", "hand_lead", "press_compliance", "press_quat", "servo_shift", "surface_at"]

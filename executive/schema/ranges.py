@@ -1,8 +1,8 @@
 """The physically meaningful range of every number a scenario holds.
 
-The scenario readers (:mod:`executive.scenario`, :mod:`executive.scenario.scene`) reject a
+The scenario readers (:mod:`executive.scenario`, :mod:`executive.schema.readers`) reject a
 value outside its range with a message naming the key path, the value and the range; the
-dataclass fields in :mod:`executive.scenario.types` and the bundled
+dataclass fields in :mod:`executive.schema.types` and the bundled
 ``scenarios/book_transfer.yaml`` document the same ranges beside each key. Units: metres,
 kilograms, seconds, degrees (as written in the file). Lower bounds that are exclusive
 (``> 0``) are stated where the readers use them.

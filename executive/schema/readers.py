@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import math
 
-from executive.scenario import ranges as R
-from executive.scenario.types import SHAPES, Body, SceneConfig, Shape, Table
-from executive.scenario.yaml_nodes import Node
+from executive.schema import ranges as R
+from executive.schema.types import SHAPES, Body, SceneConfig, Shape, Table
+from executive.schema.yaml_nodes import Node
 
 __all__ = [
     "SIZE_LENGTHS",

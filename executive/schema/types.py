@@ -9,18 +9,17 @@ cylinder ``[radius, length]``, a sphere ``[radius]``.
 Every number has a physically meaningful range, written in brackets beside its field
 (``[a, b]`` inclusive, ``(a, b]`` excluding a) and enforced by the readers with a message
 naming the key path, the value and the range; the limits are the constants of
-:mod:`executive.scenario.ranges`. Beyond the ranges, a loaded scene is physically possible
+:mod:`executive.schema.ranges`. Beyond the ranges, a loaded scene is physically possible
 (:mod:`executive.scenario.checks`): no object overlaps an obstacle or another object, every
 object and target rests on the table (or on something on it) within the robot's reach.
 """
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Literal
-
-from executive.tasks.base import Task
+from typing import ClassVar, Literal
 
 __all__ = [
     "SHAPES",
@@ -36,6 +35,7 @@ __all__ = [
     "SceneVariation",
     "Severity",
     "Table",
+    "Task",
     "TrialsConfig",
     "Uncertainty",
 ]
@@ -275,6 +275,27 @@ class TrialsConfig:
     count: int = 10  # [1, 100000]
     seed: int = 0  # [0, 2**32 - 1]
     scene_variation: SceneVariation = field(default_factory=SceneVariation)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Task:
+    """One task of a mission. Subclasses are frozen dataclasses with their kind's fields.
+
+    ``object``: the scene object the task acts on ("" for none, e.g. a press);
+    ``alternatives``: the names the scenario allows (empty: every alternative the kind offers).
+    """
+
+    kind: ClassVar[str] = ""
+    object: str
+    alternatives: tuple[str, ...] = ()
+
+    def label(self) -> str:
+        """One line for logs and tables, e.g. ``transfer book to (0.52, -0.26)``."""
+        return f"{self.kind} {self.object}".strip()
+
+    def restricted(self, names: tuple[str, ...]) -> Task:
+        """The same task allowing only ``names`` (a re-plan without the alternatives tried)."""
+        return dataclasses.replace(self, alternatives=names)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,108 @@
+"""The folders show the data flow: the package graph has no cycle, behaviours import nothing above them.
+
+Every import counts, including those only for type checking and those inside
+functions: each is a dependency a reader has to follow.
+"""
+
+from __future__ import annotations
+
+import ast
+from collections import defaultdict
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+MAX_FUNCTION_LINES = 80
+
+
+def _package_of(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    if parts[0] == "behaviours":
+        return "behaviours"
+    return f"executive.{parts[1]}" if len(parts) > 2 else "executive"
+
+
+def _imports(path: Path) -> set[str]:
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        names = []
+        if isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            names = [node.module]
+        elif isinstance(node, ast.Import):
+            names = [alias.name for alias in node.names]
+        for name in names:
+            parts = name.split(".")
+            if parts[0] == "behaviours":
+                found.add("behaviours")
+            elif parts[0] == "executive" and len(parts) > 1 and (ROOT / "executive" / parts[1]).is_dir():
+                found.add(f"executive.{parts[1]}")
+    return found
+
+
+def _graph() -> dict[str, set[str]]:
+    graph: dict[str, set[str]] = defaultdict(set)
+    for path in [*ROOT.glob("executive/**/*.py"), *ROOT.glob("behaviours/*.py")]:
+        package = _package_of(path)
+        graph[package] |= _imports(path) - {package}
+    return graph
+
+
+def _cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One cycle of the graph (as a path), or None (depth-first search, three colours)."""
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return [*stack[stack.index(nxt) :], nxt]
+            if nxt not in state and (found := visit(nxt)) is not None:
+                return found
+        state[node] = 2
+        stack.pop()
+        return None
+
+    for node in sorted(graph):
+        if node not in state and (found := visit(node)) is not None:
+            return found
+    return None
+
+
+def test_the_package_graph_has_no_cycle() -> None:
+    graph = _graph()
+    assert len(graph) >= 12  # every package was found
+    cycle = _cycle(graph)
+    assert cycle is None, "packages import each other: " + " -> ".join(cycle or [])
+
+
+def test_the_cycle_finder_finds_a_cycle() -> None:
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+    assert _cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+
+
+def test_behaviours_import_nothing_that_imports_them() -> None:
+    graph = _graph()
+    importers = {p for p, deps in graph.items() if "behaviours" in deps}
+    assert importers, "someone builds subtrees from behaviours"
+    assert not graph["behaviours"] & importers
+
+
+def test_no_library_function_is_longer_than_80_lines() -> None:
+    long = []
+    for path in [*ROOT.glob("executive/**/*.py"), *ROOT.glob("behaviours/*.py")]:
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef):
+                lines = (node.end_lineno or node.lineno) - node.lineno + 1
+                if lines > MAX_FUNCTION_LINES:
+                    long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({lines} lines)")
+    assert not long, "\n".join(long)
+
+
+def test_every_module_says_what_it_is() -> None:
+    missing = [
+        str(path.relative_to(ROOT))
+        for path in [*ROOT.glob("executive/**/*.py"), *ROOT.glob("behaviours/*.py")]
+        if path.stat().st_size and not ast.get_docstring(ast.parse(path.read_text()))
+    ]
+    assert not missing
