@@ -349,3 +349,16 @@ def test_the_g1_presses_with_its_dex3_hand(g1_mjcf: Path) -> None:
     assert (
         9.0 <= verdict.fields["min_n"] and verdict.fields["max_n"] <= 11.0 and verdict.fields["held_s"] >= 1.0
     )
+
+
+def test_a_failed_press_is_a_task_failure_not_a_fall() -> None:
+    """A press that cannot reach or hold its force did not do its task; no risk mode predicts
+    that and the robot is standing: campaigns and rollouts must not count it as a fall."""
+    from executive.execution.runner import behaviour_failure
+    from executive.risk.fusion import OBSERVED_AS
+
+    failure = behaviour_failure("press: force 3.1 N below 15 N - 1.5 N at t=2.0 s", 2.0)
+    assert failure is not None and failure.mode == "task"
+    assert not any("task" in modes for modes in OBSERVED_AS.values())
+    assert behaviour_failure("drop: hand closed but does not hold", 1.0).mode == "drop"  # type: ignore[union-attr]
+    assert behaviour_failure("lost track of the trajectory", 1.0) is None

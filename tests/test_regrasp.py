@@ -100,3 +100,30 @@ def test_handover_refuses_a_yaw_sensitive_book_and_the_regrasp_runs() -> None:
     assert result.success, result.message
     assert err < 0.02 and dyaw < 10.0  # placed, and its yaw (which matters) kept
     assert truth.data.xpos[book][2] == pytest.approx(0.825, abs=0.01)  # resting on the table
+
+
+def test_the_regrasp_risks_both_grasps_off_the_table() -> None:
+    """Each hand takes the book off the table once: the drop mode counts both grasps, the second
+    where the first hand set the book down (not where the estimate first saw it)."""
+    from executive.decision.assessment import _off_table, _table_grasp, assess_plan
+
+    scenario = from_dict(yaml.safe_load(scenario_path("book_transfer").read_text()), "book_transfer")
+    world = build(scenario)
+    planner = Planner(world)
+    plan = plan_alternative(planner, world, scenario.mission[0], "left_regrasp_right")
+    grasps = [i for i in range(len(plan.steps)) if _off_table(plan, i)]
+    assert [plan.steps[i].name for i in grasps] == ["left.grasp", "right.grasp"]
+    first, second = (_table_grasp(world, plan, i).probability for i in grasps)
+    left = plan_alternative(planner, world, scenario.mission[0], "left")
+    one_hand = assess_plan(world, left, _model(world))
+    # the same top-down grasp of the same book, once where it lay and once where it was set down
+    assert first == pytest.approx(one_hand.components["grasp"].probability, rel=1e-9)
+    assert second == pytest.approx(first, abs=0.005)
+    risk = assess_plan(world, plan, _model(world))
+    assert risk.components["grasp"].probability == pytest.approx(1 - (1 - first) * (1 - second), rel=1e-9)
+
+
+def _model(world: Any) -> Any:
+    from executive.risk.collision import CollisionModel
+
+    return CollisionModel(world, world.scenario.risk, uncertainty=world.scenario.uncertainty)

@@ -131,23 +131,57 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
     if grasp_step is None:  # the object is in hand from the start (a place) or never taken
         grasp = _placed_from_hand(world, plan)
     else:
-        approach = [s for s in plan.steps[: plan.steps.index(grasp_step)] if s.name in plan.trajectories][-1]
-        down = [
-            plan.trajectories[s.name].qpos
-            for s in plan.steps[: plan.steps.index(grasp_step)]
-            if s.name in plan.trajectories and s.side == grasp_step.side
-        ]
-        places = any(s.kind == "place" for s in plan.steps)
-        grasp = _grasp(
-            world,
-            grasp_step.side,
-            plan.task.object,
-            plan.trajectories[approach.name],
-            np.concatenate(down),
-            places=places,
-        )
+        # Every grasp that takes the object off the table (a regrasp takes it twice); a
+        # handover's grasp in the air is the hold model's.
+        grasps = [_table_grasp(world, plan, i) for i, s in enumerate(plan.steps) if _off_table(plan, i)]
+        grasp = _union(grasps)
     hold = assess_hold(world, plan, scenario.risk, scenario.uncertainty)
     return combine([collision, fall, drop_union(grasp, hold)], scenario.risk)
+
+
+def _off_table(plan: AlternativePlan, i: int) -> bool:
+    """Whether step ``i`` is a grasp of an object no hand carries then (it lies on the table)."""
+    step = plan.steps[i]
+    if step.kind != "grasp":
+        return False
+    before = [s for s in plan.steps[:i] if s.side == step.side and s.name in plan.trajectories]
+    return bool(before) and before[-1].carried is None
+
+
+def _table_grasp(world: World, plan: AlternativePlan, i: int) -> RiskReport:
+    """The grasp risk of step ``i``: the jaws down its side's moves onto the object, and the place after."""
+    step = plan.steps[i]
+    moves = [s for s in plan.steps[:i] if s.side == step.side and s.name in plan.trajectories]
+    places = any(s.kind == "place" for s in plan.steps[i:])
+    down = np.concatenate([plan.trajectories[s.name].qpos for s in moves])
+    obj = plan.task.object
+    # Set down earlier in the plan (a regrasp): it lies where the last carry left it.
+    carries = [s for s in plan.steps[:i] if s.carried is not None and s.carried[1] == obj]
+    carries = [s for s in carries if s.name in plan.trajectories]
+    if carries:
+        world = _with_object_at(world, obj, plan.trajectories[carries[-1].name].qpos[-1])
+    return _grasp(world, step.side, obj, plan.trajectories[moves[-1].name], down, places=places)
+
+
+def _with_object_at(world: World, obj: str, qpos: np.ndarray) -> World:
+    """A view of ``world`` with its own MuJoCo data, ``obj`` where ``qpos`` has it (the rest as is)."""
+    data = mujoco.MjData(world.model)
+    data.qpos[:] = world.data.qpos
+    adr = world.ids.object_qpos[obj]
+    data.qpos[adr : adr + 7] = qpos[adr : adr + 7]
+    mujoco.mj_kinematics(world.model, data)
+    return replace(world, data=data)
+
+
+def _union(reports: list[RiskReport]) -> RiskReport:
+    """Failure of any of independent ``reports`` of one mode: 1 - prod(1 - p); the first's details."""
+    if len(reports) == 1:
+        return reports[0]
+    p = 1.0 - float(np.prod([1.0 - r.probability for r in reports]))
+    lower = max(r.probability_bounds[0] for r in reports)
+    upper = min(1.0, sum(r.probability_bounds[1] for r in reports))
+    details = {**reports[0].details, "grasps": float(len(reports))}
+    return replace(reports[0], probability=p, probability_bounds=(lower, upper), details=details)
 
 
 def drop_union(grasp: RiskReport, hold: RiskReport) -> RiskReport:
@@ -195,7 +229,13 @@ def _placed_from_hand(world: World, plan: AlternativePlan) -> RiskReport:
 
 
 def _grasp(
-    world: World, side: str, obj: str, approach: Trajectory, path: np.ndarray, *, places: bool = True
+    world: World,
+    side: str,
+    obj: str,
+    approach: Trajectory,
+    path: np.ndarray,
+    *,
+    places: bool = True,
 ) -> RiskReport:
     """Grasp risk measured from the grasp point the plan intends, not the object's centre.
 

@@ -37,6 +37,8 @@ __all__ = [
 ]
 
 Status = py_trees.common.Status
+#: Behaviours' own verdicts that mean the task was not done (mode ``task``), by message prefix.
+TASK_FAILURES = ("press",)
 
 
 @dataclass
@@ -156,9 +158,13 @@ def _verify(result: RunResult, task: Task, truth: World, detector: FailureDetect
 def behaviour_failure(feedback: str, time_s: float) -> Failure | None:
     """The failure a behaviour reported itself (its message starts with the mode, ``drop: ...``).
 
-    None when the message names no failure mode (e.g. a hand that lost its track).
+    A behaviour that could not do what its task asks (``press: ...``: the force not reached or
+    not held) is mode ``task``: no risk mode predicts it, and it is no fall. None when the
+    message names no failure mode (e.g. a hand that lost its track).
     """
     mode = feedback.split(":", 1)[0] if ":" in feedback else ""
+    if mode in TASK_FAILURES:
+        return Failure("task", feedback, time_s)
     if mode in get_args(FailureMode):
         return Failure(cast(FailureMode, mode), feedback, time_s)
     return None

@@ -114,7 +114,7 @@ __all__ = [
     "FailureMode",
 ]
 
-FailureMode = Literal["collision", "fall", "drop", "unstable"]
+FailureMode = Literal["collision", "fall", "drop", "unstable", "task"]
 
 # Contact codes of the geom x geom table; 0 means allowed and silent.
 _ALLOWED = 0

@@ -54,7 +54,7 @@ __all__ = [
 ]
 
 # What the detectors can report, in the order tables show them.
-FAILURE_MODES = ("collision", "fall", "drop", "unstable", "timeout")
+FAILURE_MODES = ("collision", "fall", "drop", "unstable", "task", "timeout")
 # The predicted probability that forecasts each observed failure mode: the grasp risk is the
 # seed's risk that the object is not held (Long et al. 2018), so it forecasts drops.
 PREDICTOR = {"collision": "collision", "fall": "fall", "drop": "grasp"}
@@ -642,6 +642,7 @@ _COLUMNS = (
     ("fall", "fall", 6),
     ("drop", "drop", 6),
     ("unst.", "unstable", 6),
+    ("task", "task", 6),
     ("t/o", "timeout", 6),
     ("any", "any failure", 6),
     ("95% CI", "95% CI", 10),
