@@ -27,7 +27,9 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.spatial import ConvexHull
 
-__all__ = ["coal_geometry", "coal_transform", "mesh_hull", "set_transform"]
+from executive.schema.types import Body
+
+__all__ = ["body_geometry", "coal_geometry", "coal_transform", "mesh_hull", "set_transform"]
 
 FloatArray = NDArray[np.float64]
 
@@ -93,3 +95,12 @@ def set_transform(transform: coal.Transform3s, position: FloatArray, xmat: Float
     """Overwrite ``transform`` in place (cheaper than building a new one per knot)."""
     transform.setRotation(np.asarray(xmat, dtype=float).reshape(3, 3))
     transform.setTranslation(np.asarray(position, dtype=float).reshape(3))
+
+
+def body_geometry(body: Body) -> coal.CollisionGeometry:
+    """A scenario body (full sizes: box edges, cylinder radius and length, sphere radius) as coal geometry."""
+    if body.shape == "box":
+        return coal.Box(*(float(s) for s in body.size))
+    if body.shape == "cylinder":
+        return coal.Cylinder(float(body.size[0]), float(body.size[1]))
+    return coal.Sphere(float(body.size[0]))

@@ -25,6 +25,7 @@ from typing import Any, NoReturn
 import coal
 import numpy as np
 
+from executive.risk.shapes import body_geometry
 from executive.robot.model import RobotFacts
 from executive.schema.readers import over_table, vertical_half_extent
 from executive.schema.types import Body, Scenario, Table
@@ -108,14 +109,6 @@ def _fail(root: Node, path: str, problem: str) -> NoReturn:
 # --- overlap
 
 
-def _shape(body: Body) -> coal.CollisionGeometry:
-    if body.shape == "box":
-        return coal.Box(*body.size)
-    if body.shape == "cylinder":
-        return coal.Cylinder(body.size[0], body.size[1])
-    return coal.Sphere(body.size[0])
-
-
 def _rotation(rpy: tuple[float, float, float]) -> np.ndarray:
     """R = Rz(yaw) Ry(pitch) Rx(roll), the scenario's convention."""
     roll, pitch, yaw = rpy
@@ -138,7 +131,14 @@ def _distance(a: _Placed, b: _Placed) -> float:
     ta = coal.Transform3s(_rotation(a.rpy), np.asarray(a.centre, dtype=float))
     tb = coal.Transform3s(_rotation(b.rpy), np.asarray(b.centre, dtype=float))
     return float(
-        coal.distance(_shape(a.body), ta, _shape(b.body), tb, coal.DistanceRequest(), coal.DistanceResult())
+        coal.distance(
+            body_geometry(a.body),
+            ta,
+            body_geometry(b.body),
+            tb,
+            coal.DistanceRequest(),
+            coal.DistanceResult(),
+        )
     )
 
 

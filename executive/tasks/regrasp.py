@@ -20,6 +20,7 @@ from numpy.typing import NDArray
 
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import PlanningError
+from executive.risk.shapes import body_geometry
 from executive.schema.readers import over_table
 from executive.schema.types import Body
 from executive.tasks.hands import HandFrames, yaw_of
@@ -42,14 +43,6 @@ class Spot:
 
     centre: FloatArray
     yaw: float
-
-
-def _shape(body: Body) -> coal.CollisionGeometry:
-    if body.shape == "box":
-        return coal.Box(*body.size)
-    if body.shape == "cylinder":
-        return coal.Cylinder(body.size[0], body.size[1])
-    return coal.Sphere(body.size[0])
 
 
 def _rotation(quat: FloatArray) -> FloatArray:
@@ -78,12 +71,14 @@ def _others(world: World, obj: str) -> list[tuple[str, coal.CollisionGeometry, c
         quat = np.zeros(4)
         mujoco.mju_euler2Quat(quat, np.asarray(o.orientation_rad, dtype=float), "xyz")
         out.append(
-            (o.name, _shape(o), coal.Transform3s(_rotation(quat), np.asarray(o.position, dtype=float)))
+            (o.name, body_geometry(o), coal.Transform3s(_rotation(quat), np.asarray(o.position, dtype=float)))
         )
     for b in scene.objects:
         if b.name != obj:
             pos, quat = world.object_pose(b.name)
-            out.append((b.name, _shape(b), coal.Transform3s(_rotation(quat), np.asarray(pos, dtype=float))))
+            out.append(
+                (b.name, body_geometry(b), coal.Transform3s(_rotation(quat), np.asarray(pos, dtype=float)))
+            )
     return out
 
 
@@ -110,7 +105,7 @@ def midway_spot(world: World, obj: str, start: FloatArray, target: FloatArray, c
     z = table.height + body.half_height()
     candidates = _grid(table.position, table.size, table.yaw_rad)
     order = np.lexsort((np.linalg.norm(candidates - start[:2], axis=1), _rounded(candidates - aim)))
-    shape, rot = _shape(body), _rotation(quat)
+    shape, rot = body_geometry(body), _rotation(quat)
     others = _others(world, obj)
     blocked: dict[str, int] = {}
     for i in order:

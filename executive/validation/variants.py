@@ -39,6 +39,7 @@ import yaml
 from numpy.typing import NDArray
 
 from executive.errors import ExecutiveError, ScenarioError
+from executive.risk.shapes import body_geometry
 from executive.schema.readers import TOLERANCE, over_table, vertical_half_extent
 from executive.schema.types import Body, Scenario, SceneConfig, Table
 from executive.tasks.transfer import TransferTask
@@ -348,15 +349,6 @@ def _rotation(rpy: tuple[float, float, float]) -> FloatArray:
     return rz @ ry @ rx
 
 
-def _coal_shape(body: Body) -> coal.CollisionGeometry:
-    # coal: Box takes full side lengths, Cylinder (radius, full length), Sphere (radius).
-    if body.shape == "box":
-        return coal.Box(*(float(s) for s in body.size))
-    if body.shape == "cylinder":
-        return coal.Cylinder(float(body.size[0]), float(body.size[1]))
-    return coal.Sphere(float(body.size[0]))
-
-
 def _outline(body: Body) -> FloatArray:
     """Points of the body's surface whose horizontal hull is its footprint (world frame)."""
     if body.shape == "box":
@@ -380,7 +372,7 @@ def _distance(a: Body, b: Body) -> float:
     request.enable_signed_distance = True
     ta = coal.Transform3s(_rotation(a.orientation_rad), np.asarray(a.position, dtype=float))
     tb = coal.Transform3s(_rotation(b.orientation_rad), np.asarray(b.position, dtype=float))
-    return float(coal.distance(_coal_shape(a), ta, _coal_shape(b), tb, request, coal.DistanceResult()))
+    return float(coal.distance(body_geometry(a), ta, body_geometry(b), tb, request, coal.DistanceResult()))
 
 
 def transfers(scenario: Scenario) -> list[TransferTask]:
