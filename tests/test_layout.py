@@ -88,6 +88,18 @@ def test_behaviours_import_nothing_that_imports_them() -> None:
     assert not graph["behaviours"] & importers
 
 
+def test_every_package_is_installed() -> None:
+    """pyproject.toml lists the packages to install: a folder missing there works here and fails installed."""
+    import tomllib
+
+    listed = set(tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["packages"])
+    folders = {
+        ".".join(p.parent.relative_to(ROOT).parts)
+        for p in [*ROOT.glob("executive/**/__init__.py"), *ROOT.glob("behaviours/__init__.py")]
+    }
+    assert folders <= listed, f"not installed: {sorted(folders - listed)}"
+
+
 def test_no_library_function_is_longer_than_80_lines() -> None:
     long = []
     for path in [*ROOT.glob("executive/**/*.py"), *ROOT.glob("behaviours/*.py")]:
