@@ -10,6 +10,8 @@ import ast
 from collections import defaultdict
 from pathlib import Path
 
+import pytest
+
 ROOT = Path(__file__).resolve().parent.parent
 MAX_FUNCTION_LINES = 80
 
@@ -118,3 +120,18 @@ def test_every_module_says_what_it_is() -> None:
         if path.stat().st_size and not ast.get_docstring(ast.parse(path.read_text()))
     ]
     assert not missing
+
+
+def test_a_source_checkout_finds_its_bundled_scenarios(monkeypatch: pytest.MonkeyPatch) -> None:
+    """Run from a checkout (not installed), the scenarios are read in place, beside the package."""
+    import importlib.util
+
+    from executive.schema import catalog
+
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name, *a: None)
+    catalog.bundled_root.cache_clear()
+    try:
+        assert catalog.bundled_root() == ROOT / "scenarios"
+        assert "book_transfer" in catalog.list_scenarios()
+    finally:
+        catalog.bundled_root.cache_clear()

@@ -30,7 +30,7 @@ def bundled_root() -> Path:
     if spec is not None and spec.submodule_search_locations:
         return Path(next(iter(spec.submodule_search_locations)))
     # Source checkout not installed: the folder beside the package.
-    return Path(__file__).resolve().parent.parent / "scenarios"
+    return Path(__file__).resolve().parents[2] / "scenarios"
 
 
 def list_scenarios() -> list[str]:
