@@ -148,6 +148,8 @@ NUMBER_KEYS: list[tuple[str, float]] = [
     ("scene.objects[0].orientation", 400.0),
     ("scene.obstacles[0].size[1]", 6.0),
     ("scene.obstacles[0].position[0]", -12.0),
+    ("scene.obstacles[0].severity", 1001.0),
+    ("scene.obstacles[0].clearance", 1.5),
     ("scene.table.height", 3.5),
     ("scene.table.size[0]", 10.5),
     ("scene.table.size[2]", 0.6),
@@ -502,7 +504,48 @@ PATHS = [
     ),
 ]
 
-CASES = [*DUPLICATES, *NUMBERS, *SAFETY, *SCENES, *BODY_PARTS, *PATHS]
+# --- an obstacle's own severity, clearance and category (issue 17): none may switch a check off
+OBSTACLE_LOSS = [
+    Case(
+        "negative-clearance",
+        put(("scene.obstacles[0].clearance", -0.02)),
+        "scene.obstacles[0].clearance",
+        "> 0",
+    ),
+    Case("zero-clearance", put(("scene.obstacles[0].clearance", 0.0)), "scene.obstacles[0].clearance", "> 0"),
+    Case("zero-severity", put(("scene.obstacles[0].severity", 0)), "scene.obstacles[0].severity", "> 0"),
+    Case(
+        "negative-severity", put(("scene.obstacles[0].severity", -5.0)), "scene.obstacles[0].severity", "> 0"
+    ),
+    Case(
+        "nan-clearance",
+        put(("scene.obstacles[0].clearance", math.nan)),
+        "scene.obstacles[0].clearance",
+        "finite",
+    ),
+    Case(
+        "text-severity",
+        put(("scene.obstacles[0].severity", "high")),
+        "scene.obstacles[0].severity",
+        "a number",
+    ),
+    Case(
+        "category-typo",
+        put(("scene.obstacles[0].category", "breech")),
+        "scene.obstacles[0].category",
+        "expected one of",
+    ),
+    Case("object-severity", put(("scene.objects[0].severity", 50.0)), "scene.objects[0]", "severity"),
+    Case("object-clearance", put(("scene.objects[0].clearance", 0.05)), "scene.objects[0]", "clearance"),
+    Case(
+        "threshold-above-obstacle-severity",
+        put(("scene.obstacles[0].severity", 50.0), ("risk.threshold", 200.0)),
+        "risk.threshold",
+        "severity collision 50 x largest body-part factor 3",
+    ),
+]
+
+CASES = [*DUPLICATES, *NUMBERS, *SAFETY, *SCENES, *BODY_PARTS, *PATHS, *OBSTACLE_LOSS]
 
 
 def _write(case: Case, tmp_path: Path) -> Path:
@@ -564,7 +607,16 @@ ACCEPTED = [
     ("sigma 1e-2", text("com: 0.01", "com: 1e-2")),
     ("mass at its limit", text("mass: 0.6", "mass: 50")),
     ("threshold just below the max", text("threshold: 0.3", "threshold: 20.9")),
+    ("breach obstacle, threshold above 21", lambda source, _tmp: _breach_obstacle(source)),
 ]
+
+
+def _breach_obstacle(source: str) -> str:
+    """The bundled file with its stack a breach obstacle of severity 20 and clearance 3 cm, and a
+    threshold (40) only an obstacle's own severity makes reachable (20 x 3 + 10 + 2 = 72)."""
+    own = "      severity: 20.0\n      clearance: 3e-2\n      category: breach\n"
+    source = source.replace("      # Optional, per obstacle", own + "      # Optional, per obstacle")
+    return source.replace("  threshold: 0.3", "  threshold: 40")
 
 
 @pytest.mark.parametrize(("label", "mutate"), ACCEPTED, ids=[a[0] for a in ACCEPTED])
@@ -577,6 +629,9 @@ def test_what_people_write_and_mean_is_accepted(
     path.write_text(mutate(SOURCE, tmp_path))
     loaded = scenario.load(path)
     assert loaded.scene.objects[0].name == "book", label
+    if "breach" in label:
+        stack = loaded.scene.obstacles[0]
+        assert (stack.severity, stack.clearance, stack.category) == (20.0, 0.03, "breach")
     if "5e-2" in label:
         assert loaded.risk.d_safety == 0.05
         assert main(["validate", str(path)]) == 0

@@ -108,7 +108,7 @@ def _scenario(root: Node, base_dir: Path) -> Scenario:
         robot=robot,
         scene=scene,
         uncertainty=_optional(root, "uncertainty", _uncertainty, Uncertainty),
-        risk=_optional(root, "risk", _risk, RiskConfig),
+        risk=_optional(root, "risk", lambda n: _risk(n, scene), RiskConfig),
         approval=_optional(root, "approval", _approval, ApprovalConfig),
         mission=_mission(root.get("mission"), scene),
         trials=_optional(root, "trials", _trials, TrialsConfig),
@@ -306,7 +306,7 @@ def _scale_range(node: Node) -> tuple[float, float]:
 # ----------------------------------------------------------------------------- risk
 
 
-def _risk(node: Node) -> RiskConfig:
+def _risk(node: Node, scene: SceneConfig | None = None) -> RiskConfig:
     config = read_fields(
         node,
         RiskConfig,
@@ -323,7 +323,7 @@ def _risk(node: Node) -> RiskConfig:
             "rollouts": ("rollouts", _rollouts),
         },
     )
-    _check_threshold(node, config)
+    _check_threshold(node, config, scene)
     return config
 
 
@@ -339,13 +339,14 @@ def _com_margin(node: Node) -> float:
     return node.number(ge=0.0, le=R.COM_MARGIN_MAX)
 
 
-def max_ordering_value(risk: RiskConfig) -> tuple[float, str]:
+def max_ordering_value(risk: RiskConfig, scene: SceneConfig | None = None) -> tuple[float, str]:
     """The largest value ``risk.ordering`` can take, and how it is made up (for messages).
 
     probability: 1. weighted_sum: the collision weight times the collision metric's largest
     score (peak_weight + exposure_weight) plus the fall and grasp weights (their scores are at
-    most 1). expected_loss: the collision severity times the largest body-part factor (1 for a
-    part not listed) plus the fall and drop severities.
+    most 1). expected_loss: the collision severity (or an obstacle's own, if ``scene`` has a
+    larger one) times the largest body-part factor (1 for a part not listed) plus the fall and
+    drop severities.
     """
     if risk.ordering == "probability":
         return 1.0, "a probability is at most 1"
@@ -359,16 +360,18 @@ def max_ordering_value(risk: RiskConfig) -> tuple[float, str]:
         )
     sev = risk.severity
     factor = max([1.0, *(f for _, f in sev.body_parts)])
-    total = sev.collision * factor + sev.fall + sev.drop
+    own = [b.severity for b in scene.obstacles if b.severity is not None] if scene is not None else []
+    collision = max([sev.collision, *own])
+    total = collision * factor + sev.fall + sev.drop
     return total, (
-        f"severity collision {sev.collision:g} x largest body-part factor {factor:g} "
+        f"severity collision {collision:g} x largest body-part factor {factor:g} "
         f"+ fall {sev.fall:g} + drop {sev.drop:g}"
     )
 
 
-def _check_threshold(node: Node, risk: RiskConfig) -> None:
+def _check_threshold(node: Node, risk: RiskConfig, scene: SceneConfig | None = None) -> None:
     """A threshold at or above the ordering's largest value would never ask for approval."""
-    highest, how = max_ordering_value(risk)
+    highest, how = max_ordering_value(risk, scene)
     if risk.threshold >= highest:
         where = node.child("threshold", risk.threshold) if node.has("threshold") else node
         where.fail(

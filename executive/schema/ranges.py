@@ -27,6 +27,8 @@ OBJECT_SIZE_MAX = 2.0
 #: Object mass (kg): [1 g, 50 kg].
 MASS_MIN = 0.001
 MASS_MAX = 50.0
+#: An obstacle's own clearance (m): (0, 1] (the planner's margin and the collision d_safety for it).
+CLEARANCE_MAX = 1.0
 #: Sliding friction coefficient: [0.01, 5].
 FRICTION_MIN = 0.01
 FRICTION_MAX = 5.0

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 
 from executive.schema import ranges as R
-from executive.schema.types import SHAPES, Body, SceneConfig, Shape, Table
+from executive.schema.types import OBSTACLE_CATEGORIES, SHAPES, Body, SceneConfig, Shape, Table
 from executive.schema.yaml_nodes import Node
 
 __all__ = [
@@ -33,6 +33,7 @@ TOLERANCE = 1e-3
 _BODY_KEYS = ("name", "shape", "size", "position")
 _BODY_OPTIONAL = ("orientation", "friction", "rgba")
 _OBJECT_OPTIONAL = (*_BODY_OPTIONAL, "yaw_symmetry")
+_OBSTACLE_OPTIONAL = (*_BODY_OPTIONAL, "severity", "clearance", "category")
 
 
 def read_scene(node: Node) -> SceneConfig:
@@ -117,7 +118,7 @@ def _body(node: Node, table: Table, names: dict[str, str], *, is_object: bool) -
     else:
         if node.is_mapping() and node.has("mass"):
             node.child("mass", None).fail("obstacles are static and take no mass (objects do)")
-        node.check_keys(_BODY_KEYS, _BODY_OPTIONAL)
+        node.check_keys(_BODY_KEYS, _OBSTACLE_OPTIONAL)
     name_node = node.get("name")
     name = name_node.string()
     if name in names:
@@ -142,6 +143,7 @@ def _body(node: Node, table: Table, names: dict[str, str], *, is_object: bool) -
     rgba_values = rgba.numbers(4, ge=0.0, le=1.0) if rgba is not None else None
     symmetry_node = node.opt("yaw_symmetry") if is_object else None
     symmetry = _yaw_symmetry(symmetry_node, shape, size, rpy) if symmetry_node is not None else 1
+    severity, clearance, category = (None, None, "obstacle") if is_object else _obstacle_loss(node)
     return Body(
         name=name,
         shape=shape,
@@ -152,6 +154,24 @@ def _body(node: Node, table: Table, names: dict[str, str], *, is_object: bool) -
         friction=friction.number(ge=R.FRICTION_MIN, le=R.FRICTION_MAX) if friction is not None else 1.0,
         rgba=(rgba_values[0], rgba_values[1], rgba_values[2], rgba_values[3]) if rgba_values else None,
         yaw_symmetry=symmetry,
+        severity=severity,
+        clearance=clearance,
+        category=category,
+    )
+
+
+def _obstacle_loss(node: Node) -> tuple[float | None, float | None, str]:
+    """An obstacle's own ``severity`` (0, 1000], ``clearance`` (0, 1] m and ``category``.
+
+    Both numbers exclude 0: a zero severity or clearance would switch the obstacle's collision
+    loss or its clearance check off.
+    """
+    severity_node, clearance_node = node.opt("severity"), node.opt("clearance")
+    category_node = node.opt("category")
+    return (
+        severity_node.number(gt=0.0, le=R.SEVERITY_MAX) if severity_node is not None else None,
+        clearance_node.number(gt=0.0, le=R.CLEARANCE_MAX) if clearance_node is not None else None,
+        category_node.choice(OBSTACLE_CATEGORIES) if category_node is not None else "obstacle",
     )
 
 

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import ClassVar, Literal
 
 __all__ = [
+    "OBSTACLE_CATEGORIES",
     "SHAPES",
     "ApprovalConfig",
     "Body",
@@ -42,6 +43,8 @@ __all__ = [
 
 Shape = Literal["box", "cylinder", "sphere"]
 SHAPES: tuple[str, ...] = ("box", "cylinder", "sphere")
+#: An obstacle's ``category``: touching a "breach" obstacle breaches containment.
+OBSTACLE_CATEGORIES: tuple[str, ...] = ("obstacle", "breach")
 #: Names of the ways a two-armed robot can do a transfer task.
 
 
@@ -87,6 +90,14 @@ class Body:
     # a plain box where it was; 1 (default) means its yaw matters (a labelled container, a book
     # whose spine must face one way). Yaw errors count modulo 2*pi / yaw_symmetry.
     yaw_symmetry: int = 1
+    # Obstacles only. The loss of touching this obstacle, (0, 1000]; None: ``risk.severity.collision``.
+    severity: float | None = None
+    # m, (0, 1]: the planner's clearance to this obstacle and the collision risk's ``d_safety``
+    # for it; None: the planner's ``min_distance`` and ``risk.d_safety``.
+    clearance: float | None = None
+    # "obstacle" (default) or "breach": touching a breach obstacle (a glovebox window, a port rim)
+    # breaches containment; the risk report gives its probability and expected loss separately.
+    category: str = "obstacle"
 
     def half_height(self) -> float:
         """Half the body's vertical extent when upright (roll = pitch = 0)."""
