@@ -145,6 +145,11 @@ class CollisionSetup:
     part_factors: robot body id -> (body part, severity factor) (``Severity.body_parts``).
     hand_geoms: side -> robot geoms of the hand subtree.
     support_geoms: the geoms objects rest on (the table's), for :meth:`CollisionModel.support_allow`.
+    env_clearance: environment body id -> its own ``d_safety`` (m) (an obstacle's ``clearance``);
+        missing: ``risk.d_safety``.
+    env_severity: environment body id -> its own collision severity (an obstacle's ``severity``);
+        missing: ``risk.severity.collision``.
+    breach_bodies: environment body ids whose touch breaches containment (``category: breach``).
     """
 
     robot_geoms: tuple[int, ...]
@@ -154,6 +159,9 @@ class CollisionSetup:
     part_factors: Mapping[int, tuple[str, float]] = field(default_factory=dict)
     hand_geoms: Mapping[str, tuple[int, ...]] = field(default_factory=dict)
     support_geoms: tuple[int, ...] = ()
+    env_clearance: Mapping[int, float] = field(default_factory=dict)
+    env_severity: Mapping[int, float] = field(default_factory=dict)
+    breach_bodies: frozenset[int] = frozenset()
 
     @classmethod
     def from_world(
@@ -190,6 +198,7 @@ class CollisionSetup:
             side: tuple(g for g in ids.robot_geoms if int(model.geom_bodyid[g]) in set(bodies))
             for side, bodies in ids.hand_bodies.items()
         }
+        clearance, severity, breach = _obstacle_losses(world)
         return cls(
             robot_geoms=tuple(ids.robot_geoms),
             env_geoms=env,
@@ -198,7 +207,31 @@ class CollisionSetup:
             part_factors=factors,
             hand_geoms=hands,
             support_geoms=tuple(g for g in ids.table_geoms if g >= 0),
+            env_clearance=clearance,
+            env_severity=severity,
+            breach_bodies=breach,
         )
+
+
+def _obstacle_losses(world: World) -> tuple[dict[int, float], dict[int, float], frozenset[int]]:
+    """The scene obstacles' own clearance, severity and breach category by body id (the
+    :class:`CollisionSetup` fields ``env_clearance``, ``env_severity``, ``breach_bodies``)."""
+    model, geoms = world.model, world.ids.obstacle_geoms
+    clearance: dict[int, float] = {}
+    severity: dict[int, float] = {}
+    breach: set[int] = set()
+    for body in world.scenario.scene.obstacles:
+        geom = geoms.get(body.name, -1)
+        if geom < 0:
+            continue
+        b = int(model.geom_bodyid[geom])
+        if body.clearance is not None:
+            clearance[b] = float(body.clearance)
+        if body.severity is not None:
+            severity[b] = float(body.severity)
+        if body.category == "breach":
+            breach.add(b)
+    return clearance, severity, frozenset(breach)
 
 
 @dataclass(frozen=True)
@@ -207,8 +240,11 @@ class KnotDistance:
 
     distance: signed minimum distance (m), negative when penetrating.
     normal: unit vector from the environment geom to the robot geom.
-    risk: the seed's instantaneous risk at ``distance``.
+    risk: the seed's instantaneous risk: at ``distance``, or with obstacles of their own
+        clearance the largest over the near pairs, each against its body's ``d_safety``.
     near: every pair within the cutoff (for the probability), closest pair included.
+    scaled: with obstacles of their own clearance, ``min_pairs d / d_safety(body)`` times
+        ``risk.d_safety`` (the distance the seed metric scores); None: ``distance``.
     """
 
     distance: float
@@ -225,6 +261,7 @@ class KnotDistance:
     pairs_checked: int
     pairs_skipped: int
     near: tuple[NearPair, ...] = ()
+    scaled: float | None = None
 
 
 @dataclass(frozen=True)
@@ -237,6 +274,11 @@ class CollisionProfile:
     @property
     def distances(self) -> FloatArray:
         return np.array([k.distance for k in self.knots])
+
+    @property
+    def scaled_distances(self) -> FloatArray:
+        """Per knot the distance the seed metric scores (:attr:`KnotDistance.scaled`)."""
+        return np.array([k.distance if k.scaled is None else k.scaled for k in self.knots])
 
     @property
     def risks(self) -> FloatArray:
@@ -527,12 +569,11 @@ class CollisionModel:
     def _cutoffs(self, env: list[int], carried_geom: int | None) -> FloatArray:
         """Broad-phase cutoff (m) per environment geom: ``d_safety + margin + n_sigma * sigma``,
         sigma its body's horizontal 1-sigma combined with a carried object's own."""
-        d_safety = self.risk_config.d_safety
         # A carried object's own pose error widens the band in which its pairs are uncertain.
         own = self.carried_sigma.get(carried_geom, 0.0) if carried_geom is not None else 0.0
         cutoff = np.array(
             [
-                d_safety
+                self.d_safety(int(self.model.geom_bodyid[e]))
                 + self.margin
                 + self.n_sigma
                 * math.hypot(self.setup.env_sigma.get(int(self.model.geom_bodyid[e]), 0.0), own)
@@ -750,6 +791,17 @@ class CollisionModel:
         with its witness points (robot, environment) and normal, and the pairs coal checked."""
         point_robot, point_env, normal = witness
         config = self.risk_config
+        risk, scaled = _risk(best, config.d_safety, config.collision.exponent), None
+        if self.setup.env_clearance and best < math.inf:
+            # Each pair against its body's own d_safety: the knot's risk is the largest.
+            ratio = min(
+                [
+                    best / self.d_safety(int(self.model.geom_bodyid[env])),
+                    *(p.distance / self.d_safety(p.env_body) for p in near_pairs),
+                ]
+            )
+            scaled = ratio * config.d_safety
+            risk = _risk(ratio, 1.0, config.collision.exponent)
         return KnotDistance(
             distance=best,
             robot_geom=robot,
@@ -761,11 +813,26 @@ class CollisionModel:
             point_robot=point_robot,
             point_env=point_env,
             normal=normal,
-            risk=_risk(best, config.d_safety, config.collision.exponent),
+            risk=risk,
             pairs_checked=checked,
             pairs_skipped=n_pairs - checked,
             near=tuple(near_pairs),
+            scaled=scaled,
         )
+
+    def d_safety(self, env_body: int) -> float:
+        """The collision metric's ``d_safety`` (m) for an environment body: its own clearance,
+        else ``risk.d_safety``."""
+        return float(self.setup.env_clearance.get(env_body, self.risk_config.d_safety))
+
+    def body_name(self, body: int) -> str:
+        """The MuJoCo name of body ``body``."""
+        return self._body_names[body]
+
+    def severity(self, env_body: int) -> float:
+        """The loss of touching an environment body (before the body-part factor): its own
+        severity, else ``risk.severity.collision``."""
+        return float(self.setup.env_severity.get(env_body, self.risk_config.severity.collision))
 
     @property
     def carried_sigma(self) -> dict[int, float]:
@@ -800,11 +867,15 @@ def report_from_profile(model: CollisionModel, prof: CollisionProfile) -> RiskRe
 
     Severity = ``severity.collision`` x the body-part factor of the robot body in the
     closest approach (Long et al. 2018, conclusion: more sensitive parts such as cameras
-    weigh more). Probability: first order, union over all knots (see the module doc).
+    weigh more); with obstacles of their own severity, the collision severity is the mean of
+    the bodies' severities weighted by their probabilities, so that the expected loss is
+    ``P x factor x sum_b P_b s_b / sum_b P_b`` (each body's share linear in its severity).
+    Probability: first order, union over all knots (see the module doc). With breach
+    obstacles, ``details`` adds the probability of touching any of them and its expected loss.
     """
     config = model.risk_config
     distances = prof.distances
-    seed = seed_collision_score(prof.times, distances, config.d_safety, config.collision)
+    seed = seed_collision_score(prof.times, prof.scaled_distances, config.d_safety, config.collision)
     prob = collision_probability(
         [k.near for k in prof.knots], model.setup.env_sigma, robot_sigma=model.carried_sigma
     )
@@ -827,11 +898,14 @@ def report_from_profile(model: CollisionModel, prof: CollisionProfile) -> RiskRe
         "probability_method": "first-order union over knots (static Gaussian pose error per body, "
         "a carried object's own error included)",
     }
+    severity = _weighted_severity(model, prob.per_body, model.setup.env_severity.keys())
+    if model.setup.breach_bodies:
+        details.update(_breach_details(model, prob.per_body, factor))
     return RiskReport(
         mode="collision",
         probability=prob.probability,
         probability_bounds=(prob.lower, prob.upper),
-        severity=float(config.severity.collision) * factor,
+        severity=severity * factor,
         seed_score=seed.score,
         times=prof.times,
         traces={
@@ -841,6 +915,38 @@ def report_from_profile(model: CollisionModel, prof: CollisionProfile) -> RiskRe
         },
         details=details,
     )
+
+
+def _weighted_severity(
+    model: CollisionModel, per_body: Mapping[int, float], bodies: Collection[int]
+) -> float:
+    """The collision severity: ``risk.severity.collision``, or with ``bodies`` (of their own
+    severity) in the scene the bodies' severities weighted by their touch probabilities."""
+    base = float(model.risk_config.severity.collision)
+    total = sum(per_body.values())
+    if not bodies or total <= 0.0:
+        return base
+    return sum(p * model.severity(b) for b, p in per_body.items()) / total
+
+
+def _breach_details(
+    model: CollisionModel, per_body: Mapping[int, float], factor: float
+) -> dict[str, float | str]:
+    """P(touching any breach obstacle) (independent bodies, as the union over bodies) and its
+    expected loss: that probability x the breach bodies' probability-weighted severity x the
+    body-part factor."""
+    breach = {b: p for b, p in per_body.items() if b in model.setup.breach_bodies}
+    miss = 1.0
+    for p in breach.values():
+        miss *= 1.0 - p
+    total = sum(breach.values())
+    mean = sum(p * model.severity(b) for b, p in breach.items()) / total if total > 0.0 else 0.0
+    names = sorted(model.body_name(b) for b in model.setup.breach_bodies)
+    return {
+        "breach_probability": 1.0 - miss,
+        "breach_expected_loss": (1.0 - miss) * mean * factor,
+        "breach_bodies": ", ".join(names),
+    }
 
 
 # --- Monte Carlo validation -----------------------------------------------------------------------

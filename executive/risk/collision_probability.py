@@ -127,6 +127,9 @@ class ProbabilityEstimate(NamedTuple):
     lower: float  # max_k P_k
     upper: float  # min(1, sum_k P_k)
     per_knot: FloatArray  # P_k
+    # environment body id -> P(that body is touched over the trajectory); bodies no pair came
+    # near are missing (P = 0)
+    per_body: Mapping[int, float] = {}
 
 
 class _Events(NamedTuple):
@@ -213,4 +216,15 @@ def collision_probability(
     lower = float(np.max(per_knot)) if n_knots else 0.0
     upper = float(min(1.0, np.sum(per_knot)))
     point = float(np.clip(1.0 - np.prod(1.0 - per_body), lower, upper))
-    return ProbabilityEstimate(point, lower, upper, per_knot)
+    return ProbabilityEstimate(
+        point, lower, upper, per_knot, _by_env_body(bodies // (len(own_table) + 1), per_body)
+    )
+
+
+def _by_env_body(env_body: NDArray[np.int_], per_group: FloatArray) -> dict[int, float]:
+    """P(any group of each environment body) from the groups' probabilities (a body's groups:
+    itself, and itself against each carried geom with its own sigma; independent, as above)."""
+    miss: dict[int, float] = {}
+    for b, p in zip(env_body.tolist(), per_group.tolist(), strict=True):
+        miss[b] = miss.get(b, 1.0) * (1.0 - p)
+    return {b: 1.0 - m for b, m in miss.items()}
