@@ -307,12 +307,24 @@ class Planner:
         return [p for p in geom_pairs(self.model, groups) if not allowed & set(p)]
 
     def required_clearance(self, pairs: Sequence[tuple[int, int]]) -> FloatArray:
-        """Clearance (m) each pair must keep: ``table_distance`` against the table, else ``min_distance``."""
+        """Clearance (m) each pair must keep: an obstacle's own ``clearance`` against that
+        obstacle, ``table_distance`` against the table, else ``min_distance``."""
         table = set(self.world.ids.table_geoms)
+        geoms = self.world.ids.obstacle_geoms
+        own = {
+            geoms[b.name]: b.clearance
+            for b in self.world.scenario.scene.obstacles
+            if b.clearance is not None and geoms.get(b.name, -1) >= 0
+        }
         cfg = self.config
-        return np.array(
-            [cfg.table_distance if table & {a, b} else cfg.min_distance for a, b in pairs], dtype=float
-        )
+
+        def required(a: int, b: int) -> float:
+            for g in (a, b):
+                if g in own:
+                    return float(own[g])
+            return cfg.table_distance if table & {a, b} else cfg.min_distance
+
+        return np.array([required(a, b) for a, b in pairs], dtype=float)
 
     def _geom(self, name: str) -> int:
         if name not in self.geom_names:
@@ -522,7 +534,7 @@ class Planner:
                     pairs,
                     # As for the balance: a little extra in the QP keeps the interpolated knots clear.
                     required + cfg.clearance_tolerance,
-                    cfg.detection_distance,
+                    _detection_distance(cfg, required),
                     cfg.collision_gain,
                     attach,
                     cfg.collision_recovery,
@@ -827,3 +839,13 @@ def _rotation_angle(a: FloatArray, b: FloatArray) -> float:
     if norm < 1e-10:
         return 0.0
     return 2.0 * math.atan2(norm, float(q[0]))
+
+
+def _detection_distance(cfg: PlannerConfig, required: FloatArray) -> float:
+    """The collision limit's detection distance: the configured one, widened for an obstacle's
+    own clearance above ``min_distance`` so that its pairs enter the QP as far beyond their
+    clearance as the others do."""
+    widest = float(np.max(required, initial=0.0))
+    if widest <= cfg.min_distance:
+        return cfg.detection_distance
+    return max(cfg.detection_distance, widest + cfg.detection_distance - cfg.min_distance)
