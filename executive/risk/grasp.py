@@ -15,6 +15,7 @@ from typing import Literal, NamedTuple
 import mujoco
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.spatial import ConvexHull, QhullError
 from scipy.special import expit
 
 from executive.planning.timing import Trajectory
@@ -25,6 +26,7 @@ from executive.risk.gaussian import (
     normal_cdf,
     union_bounds,
 )
+from executive.risk.hand_span import hand_span
 from executive.risk.report import RiskReport
 from executive.schema.types import GraspRiskConfig, RiskConfig, Uncertainty
 from executive.world.model import World
@@ -213,8 +215,10 @@ def grasp_tolerance(
     extent across the jaws (the pads must land on it); yaw: the largest rotation at which the
     object still fits between the open jaws, w cos t + L sin t <= opening (pi/2 if it always
     fits, 0 if it never does). jaw_opening None: the sum over the gripper's actuators of
-    (open - closed), valid when they drive slide joints measured from touching pads (the
-    bundled humanoid: 2 x 0.085 m); other hands need an explicit value.
+    (open - closed) when they drive slide joints measured from touching pads (the bundled
+    humanoid: 2 x 0.085 m); for any other hand (the G1's Dex3) the free span between its
+    open thumb and fingers across the site, measured on the model
+    (:func:`executive.risk.hand_span.hand_span`).
     """
     model = world.model
     if side not in world.profile.arms:
@@ -225,16 +229,14 @@ def grasp_tolerance(
         grip = world.profile.arms[side].gripper
         acts = world.ids.gripper_actuators[side]
         joints = [int(model.actuator_trnid[a, 0]) for a in acts]
-        if not acts or any(
-            model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT
-            or model.jnt_type[j] != mujoco.mjtJoint.mjJNT_SLIDE
+        if acts and all(
+            model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
+            and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE
             for a, j in zip(acts, joints, strict=True)
         ):
-            raise ValueError(
-                f"grasp_tolerance: the {side} gripper's actuators do not all drive slide joints; "
-                "give jaw_opening (m) explicitly"
-            )
-        jaw_opening = float(sum(abs(o - c) for o, c in zip(grip.open, grip.closed, strict=True)))
+            jaw_opening = float(sum(abs(o - c) for o, c in zip(grip.open, grip.closed, strict=True)))
+        else:  # a dexterous hand: the opening its open fingers and thumb leave, measured
+            jaw_opening = hand_span(world, side).opening
     geom = world.ids.object_geoms[obj]
     c_axis = np.asarray(closing_axis_object, dtype=float).reshape(3)
     c_axis = c_axis / np.linalg.norm(c_axis)
@@ -361,6 +363,38 @@ def _geom_corners(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> Floa
     return np.asarray(data.geom_xpos[geom] + (centre + signs * half) @ rot.T, dtype=float)
 
 
+def _mesh_vertices(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> FloatArray:
+    """World positions (n, 3) of a mesh geom's vertices (MuJoCo stores them in the geom's frame)."""
+    mesh = int(model.geom_dataid[geom])
+    start, count = int(model.mesh_vertadr[mesh]), int(model.mesh_vertnum[mesh])
+    local = np.asarray(model.mesh_vert[start : start + count], dtype=float)
+    return np.asarray(data.geom_xpos[geom] + local @ data.geom_xmat[geom].reshape(3, 3).T, dtype=float)
+
+
+def _below(model: mujoco.MjModel, data: mujoco.MjData, geom: int, top: float) -> FloatArray:
+    """The points of a hand geom below ``top`` that can meet the object's side on the way down.
+
+    A mesh (a dexterous hand's finger) gives its vertices below the top; a primitive gives all
+    its bounding box's corners when its lowest corner is below the top (none otherwise).
+    """
+    if model.geom_type[geom] == mujoco.mjtGeom.mjGEOM_MESH:
+        verts = _mesh_vertices(model, data, geom)
+        return verts[verts[:, 2] < top]
+    pts = _geom_corners(model, data, geom)
+    return pts if float(pts[:, 2].min()) < top else np.zeros((0, 3))
+
+
+def _extreme_points(points: FloatArray) -> FloatArray:
+    """The vertices of the 2-D convex hull of ``points`` (all of them when there are few or they are
+    degenerate): a linear function's minimum over the points is attained at one of them."""
+    if len(points) <= 64:
+        return points
+    try:
+        return np.asarray(points[ConvexHull(points).vertices], dtype=float)
+    except QhullError:
+        return points
+
+
 def approach_envelope(
     world: World,
     side: str,
@@ -401,13 +435,18 @@ def approach_envelope(
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
         for g in geoms:
-            pts = _geom_corners(model, data, g)
-            if float(pts[:, 2].min()) < top:
+            pts = _below(model, data, g, top)
+            if len(pts):
                 rel = pts - centre
                 corners.append(np.column_stack([rel @ x_world, rel @ y_world]))
     flat = np.concatenate(corners) if corners else np.zeros((0, 2))
     width = half_extent(model, geom, c_axis)
-    return ApproachEnvelope(flat[flat[:, 1] > 0.0], flat[flat[:, 1] <= 0.0], float(width))
+    # Beyond the object's circumradius along its lateral axis a point passes its end at any yaw
+    # (e.g. a hand starting at the robot's hip, below the table top, far to one side).
+    reach = float(np.hypot(width, half_extent(model, geom, np.cross(c_axis, [0.0, 0.0, 1.0]))))
+    flat = flat[np.abs(flat[:, 0]) <= reach]
+    side_a, side_b = flat[flat[:, 1] > 0.0], flat[flat[:, 1] <= 0.0]
+    return ApproachEnvelope(_extreme_points(side_a), _extreme_points(side_b), float(width))
 
 
 def approach_miss_probability(

@@ -21,25 +21,18 @@ Usage::
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
-
-import mujoco
-import numpy as np
-from numpy.typing import NDArray
 
 from executive.planning.types import PlanningError
 from executive.risk.grasp import grasp_tolerance
+from executive.risk.hand_span import hand_span
 from executive.world.model import World
 
 __all__ = ["GraspGeometryError", "HandGeometry", "check_grasp", "hand_geometry", "min_thickness"]
 
-FloatArray = NDArray[np.float64]
 
 #: m of floating-point rounding in the geometry (box corners and targets from rotations).
 _ROUNDING = 1e-6
-#: m either side of the site, across the jaws, that the opening is measured over (a pad's width).
-_FAN_HALF_WIDTH = 0.03
 
 
 class GraspGeometryError(PlanningError):
@@ -63,57 +56,12 @@ class HandGeometry:
     finger_depth: float
 
 
-def _open_hand(world: World) -> mujoco.MjData:
-    """A scratch MjData at the home keyframe (the world builder opens the hands there), posed."""
-    data = mujoco.MjData(world.model)
-    mujoco.mj_resetDataKeyframe(world.model, data, world.ids.keyframe)
-    mujoco.mj_kinematics(world.model, data)
-    return data
-
-
-def _hand_geoms(world: World, side: str) -> list[int]:
-    """The collision geoms of the hand's subtree."""
-    model = world.model
-    bodies = set(world.ids.hand_bodies[side])
-    return [
-        g
-        for g in range(model.ngeom)
-        if int(model.geom_bodyid[g]) in bodies and (model.geom_contype[g] or model.geom_conaffinity[g])
-    ]
-
-
-def _corners(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> FloatArray:
-    """World corners (8, 3) of a geom's local bounding box (the box itself for a box geom)."""
-    centre, half = model.geom_aabb[geom, :3], model.geom_aabb[geom, 3:]
-    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))
-    rot = data.geom_xmat[geom].reshape(3, 3)
-    return np.asarray(data.geom_xpos[geom] + (centre + signs * half) @ rot.T, dtype=float)
-
-
-def _ray(
-    model: mujoco.MjModel, data: mujoco.MjData, geoms: list[int], start: FloatArray, way: FloatArray
-) -> float:
-    """Distance from ``start`` along the unit vector ``way`` to the first of ``geoms`` (inf: none)."""
-    best = np.inf
-    for g in geoms:
-        if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_MESH:
-            hit = mujoco.mj_rayMesh(model, data, g, start, way)
-        else:
-            hit = mujoco.mju_rayGeom(
-                data.geom_xpos[g], data.geom_xmat[g], model.geom_size[g], start, way, int(model.geom_type[g])
-            )
-        if hit >= 0.0:
-            best = min(best, float(hit))
-    return float(best)
-
-
 def hand_geometry(world: World, side: str) -> HandGeometry:
     """Measure the ``side`` hand, open (the home keyframe), on the world's model.
 
-    The jaw opening is the free span through the site along its closing axis: rays from the
-    site both ways to the hand's collision geoms (``mj_rayMesh`` / ``mju_rayGeom``). The
-    finger depth is the largest extent of those geoms' bounding boxes along the site's
-    approach axis (z), from the site.
+    The jaw opening is the free span through the site along its closing axis and the finger
+    depth the hand's reach past the site along its approach axis
+    (:func:`executive.risk.hand_span.hand_span`).
 
     Args:
         world: the world whose robot has the hand.
@@ -122,40 +70,19 @@ def hand_geometry(world: World, side: str) -> HandGeometry:
     Returns:
         The hand's :class:`HandGeometry`.
     """
-    model = world.model
-    data = _open_hand(world)
-    site = world.ids.hand_sites[side]
-    origin = data.site_xpos[site].copy()
-    frame = data.site_xmat[site].reshape(3, 3)
-    closing, approach = frame[:, 1].copy(), frame[:, 2].copy()
-    geoms = _hand_geoms(world, side)
-    corners = np.vstack([_corners(model, data, g) for g in geoms])
-    depth = max(float(np.max((corners - origin) @ approach)), 0.0)
-    # Parallel rays through the region an object between the jaws fills: across the site's
-    # lateral axis (x) and down its approach axis to the fingertips; each jaw's nearest hit.
-    lateral = frame[:, 0]
-    starts = [
-        origin + a * lateral + b * approach
-        for a in np.linspace(-_FAN_HALF_WIDTH, _FAN_HALF_WIDTH, 5)
-        for b in np.linspace(0.0, depth, 3)
-    ]
-    near = min(_ray(model, data, geoms, p, closing) for p in starts)
-    far = min(_ray(model, data, geoms, p, -closing) for p in starts)
-    return HandGeometry(jaw_opening=near + far, finger_depth=depth)
+    span = hand_span(world, side)
+    return HandGeometry(jaw_opening=span.opening, finger_depth=span.finger_depth)
 
 
 def _width_and_opening(world: World, side: str, obj: str) -> tuple[float, float]:
     """The object's width across the jaws and the jaw opening (m), from ``grasp_tolerance``.
 
     ``closing = (opening - width) / 2``: asked with a zero opening it gives the width; asked
-    with the gripper's own opening (its slide jaws' open and closed positions) the opening.
-    A hand without slide jaws has its opening measured (:func:`hand_geometry`).
+    with the gripper's own opening (its slide jaws' travel, or a dexterous hand's measured
+    span) the opening.
     """
     width = -2.0 * grasp_tolerance(world, side, obj, jaw_opening=0.0).closing
-    try:
-        opening = 2.0 * grasp_tolerance(world, side, obj).closing + width
-    except ValueError:  # not slide jaws: the opening the model's open hand leaves
-        opening = hand_geometry(world, side).jaw_opening
+    opening = 2.0 * grasp_tolerance(world, side, obj).closing + width
     return width, opening
 
 
