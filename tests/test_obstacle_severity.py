@@ -11,6 +11,7 @@ and measures the least distance to it with coal over the planned knots.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from pathlib import Path
 
@@ -180,3 +181,27 @@ def test_bad_keys_are_refused_with_their_key_path(
     err = capsys.readouterr().err
     assert f"{path}: scene.obstacles[0].{keys.split(':')[0]}" in err, err
     assert message in err and "Traceback" not in err
+
+
+def test_the_risk_table_and_the_decision_rows_give_the_breach() -> None:
+    from executive.decision.assessment import assess_task
+    from executive.decision.selector import risk_row
+    from executive.report.plots import risk_json, risk_table
+
+    s = _with_stack("severity: 100;category: breach")
+    rows = assess_task(build(s), s.mission[0])
+    table = risk_table(s, "transfer", rows)
+    data = json.loads(risk_json(s, [("transfer", rows)]))["tasks"][0]["alternatives"]
+    for alt, machine in zip(rows, data, strict=True):
+        assert alt.risk is not None
+        collision = alt.risk.components["collision"]
+        breach = risk_row(alt, s.risk.ordering)["breach"]
+        assert breach == machine["risk"]["breach"]
+        assert breach["bodies"] == "book_stack"
+        # The stack is the only breach body: its probability is at most the collision's, and
+        # its loss at most the collision's (severity 100 weighted in, never more than all of it).
+        assert 0.0 <= breach["probability"] <= collision.probability
+        assert breach["expected_loss"] <= collision.expected_loss + 1e-12
+        assert f"breach (book_stack): P {breach['probability']:.4f}" in table
+    plain = scenario.loads(SOURCE)
+    assert "breach" not in risk_table(plain, "transfer", assess_task(build(plain), plain.mission[0]))

@@ -55,7 +55,7 @@ from executive.decision.audit import AuditLog
 from executive.decision.physics_check import PhysicsCheck, PhysicsVerdict, physics_text
 from executive.errors import ExecutiveError
 from executive.planning.planner import Planner
-from executive.risk.collision import CollisionModel
+from executive.risk.collision import CollisionModel, breach_summary
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
 from executive.world.model import World
@@ -88,6 +88,9 @@ def risk_row(alt: AlternativeRisk, ordering: str) -> dict[str, Any]:
         row["reason"] = alt.error
         return row
     row["risk"] = alt.risk.as_dict()
+    breach = breach_summary(alt.risk.components["collision"]) if "collision" in alt.risk.components else None
+    if breach is not None:  # touching a breach obstacle (category breach), apart from any collision
+        row["breach"] = breach
     row["value"] = alt.risk.value(ordering)
     row["planned_duration_s"] = alt.plan.duration if alt.plan is not None else None
     row["plan_s"], row["assess_s"] = alt.plan_s, alt.assess_s

@@ -16,6 +16,7 @@ import numpy as np
 
 from executive.decision.assessment import AlternativeRisk
 from executive.decision.physics_check import physics_text
+from executive.risk.collision import breach_summary
 from executive.schema.types import Scenario
 
 __all__ = ["chosen_index", "plot_alternatives", "risk_json", "risk_table"]
@@ -92,6 +93,12 @@ def risk_table(
             + f"{r.probability:>10.4f}{r.weighted_sum:>10.3f}{r.expected_loss:>10.4f}"
             + f"{dist * 1000:>8.1f}mm{margin * 1000:>7.1f}mm"
         )
+        breach = breach_summary(c["collision"])
+        if breach is not None:
+            lines.append(
+                f"  {'':<15}breach ({breach['bodies']}): P {float(breach['probability']):.4f}, "
+                f"exp. loss {float(breach['expected_loss']):.4f}"
+            )
         if alt.physics is not None:
             lines.append(f"  {'':<15}{physics_text(alt.physics)}{_fused_text(alt.physics)}")
     lines.append(f"collision/fall/grasp/P(any): probabilities; seed sum: the seed's weighted sum; {legend}")
@@ -134,6 +141,9 @@ def risk_json(scenario: Scenario, tasks: Sequence[tuple[str, Sequence[Alternativ
                     "expected_loss": float(r.expected_loss),
                     "seed": {m: float(r.components[m].seed_score) for m in _MODES},
                 }
+                breach = breach_summary(r.components["collision"])
+                if breach is not None:
+                    row["risk"]["breach"] = breach
                 row["planned_duration_s"] = alt.plan.duration if alt.plan else None
                 row["plan_s"] = alt.plan_s
                 row["assess_s"] = alt.assess_s

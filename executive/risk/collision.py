@@ -48,6 +48,7 @@ __all__ = [
     "SeedScore",
     "TrajectoryLike",
     "assess_collision",
+    "breach_summary",
     "collision_probability",
     "gaussian_union_probability",
     "instantaneous_risk",
@@ -946,6 +947,19 @@ def _breach_details(
         "breach_probability": 1.0 - miss,
         "breach_expected_loss": (1.0 - miss) * mean * factor,
         "breach_bodies": ", ".join(names),
+    }
+
+
+def breach_summary(report: RiskReport) -> dict[str, float | str] | None:
+    """The breach part of a collision report, for tables and logs: ``{"probability",
+    "expected_loss", "bodies"}``; None when the scene has no breach obstacle."""
+    details = report.details
+    if "breach_probability" not in details:
+        return None
+    return {
+        "probability": float(details["breach_probability"]),
+        "expected_loss": float(details["breach_expected_loss"]),
+        "bodies": str(details["breach_bodies"]),
     }
 
 
