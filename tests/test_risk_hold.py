@@ -10,7 +10,6 @@ it held (soft contacts creep a little even inside the cone).
 from __future__ import annotations
 
 from pathlib import Path
-from types import SimpleNamespace
 
 import mujoco
 import numpy as np
@@ -21,13 +20,12 @@ from behaviours.robot_access import install
 from executive.decision.assessment import assess_plan
 from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.detectors import FailureDetector
-from executive.planning.plan import AlternativePlan, Step
+from executive.planning.plan import AlternativePlan
 from executive.planning.planner import Planner
 from executive.risk.collision import CollisionModel
 from executive.risk.hold import (
     CarrySpan,
     Grip,
-    HoldModelUnavailable,
     assess_hold,
     contact_impedance,
     contact_parameters,
@@ -273,20 +271,14 @@ def test_drop_mode_is_the_union_of_grasp_and_hold(heavy: tuple[World, Alternativ
     assert "drop_reason" in drop.details
 
 
-def test_a_hand_without_parallel_jaws_is_reported_not_modelled(g1_scenario_yaml: str) -> None:
-    # The G1's Dex3 hand closes hinged fingers: no jaw force to read off the model.
+def test_a_thumb_against_fingers_hand_is_modelled_by_its_squeeze(g1_scenario_yaml: str) -> None:
+    # The G1's Dex3 hand closes hinged fingers: its grip force is the thumb's and fingers'
+    # squeeze (tests/test_g1_dex3.py checks it against physics), its pads their contact geoms.
     scenario = loads(g1_scenario_yaml, source="g1_book_transfer.yaml")
     world = build(scenario)
-    with pytest.raises(HoldModelUnavailable, match="not a parallel jaw"):
-        grip(world, "left", "book", np.array([0.0, 1.0, 0.0]))
-    plan = SimpleNamespace(
-        task=SimpleNamespace(object="book"),
-        steps=(Step("grasp", "left.grasp", "left", obj="book"),),
-        trajectories={},
-    )
-    report = assess_hold(world, plan, scenario.risk, scenario.uncertainty)
-    assert report.probability == 0.0 and report.probability_bounds == (0.0, 1.0)
-    assert str(report.details["hold_model"]).startswith("unavailable")
+    g = grip(world, "left", "book", np.array([0.0, 1.0, 0.0]))
+    assert 10.0 < g.force < 50.0 and len(g.pads) == 3
+    assert (g.pad_half > 0.0).all() and g.half_width == pytest.approx(0.045)
 
 
 @pytest.mark.parametrize(("priority", "pad_mu", "box_scale"), [(1, 0.8, 2.0), (0, 0.8, 2.0), (0, 1.5, 0.5)])

@@ -60,6 +60,8 @@ from executive.errors import ExecutiveError
 from executive.planning.timing import Trajectory
 from executive.risk.gaussian import gauss_hermite_normal
 from executive.risk.grasp import half_extent
+from executive.risk.hand_grip import dexterous_squeeze
+from executive.risk.hand_span import posed_hand
 from executive.risk.report import RiskReport
 from executive.schema.types import RiskConfig, Uncertainty
 from executive.world.model import World
@@ -261,22 +263,28 @@ def grip(world: World, side: str, obj: str, closing_axis_object: FloatArray) -> 
         The :class:`Grip`.
 
     Raises:
-        HoldModelUnavailable: the gripper's actuators are not position servos on slide joints
-            (e.g. a dexterous hand), so no jaw force can be read off the model.
+        HoldModelUnavailable: the gripper's actuators are not position servos on joints, or a
+            hand without slide jaws has no thumb opposing its fingers, so no grip force can be
+            read off the model.
+
+    A hand whose servos drive hinge joints (the G1's Dex3) is a thumb against fingers: its
+    force is their squeeze at the closed targets (:func:`executive.risk.hand_grip.dexterous_squeeze`)
+    and its pads the chains' contact geoms (:func:`_dexterous_grip`).
     """
     model, data = world.model, world.data
     acts = world.ids.gripper_actuators[side]
     joints = [int(model.actuator_trnid[a, 0]) for a in acts]
     if not acts or any(
         model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT
-        or model.jnt_type[j] != mujoco.mjtJoint.mjJNT_SLIDE
         or model.actuator_biastype[a] != mujoco.mjtBias.mjBIAS_AFFINE
-        for a, j in zip(acts, joints, strict=True)
+        for a in acts
     ):
         raise HoldModelUnavailable(
-            f"the {side} gripper is not a parallel jaw of position servos on slide joints; "
+            f"the {side} gripper's actuators are not position servos on joints; "
             "the hold model does not cover it"
         )
+    if any(model.jnt_type[j] != mujoco.mjtJoint.mjJNT_SLIDE for j in joints):
+        return _dexterous_grip(world, side, obj, np.asarray(closing_axis_object, dtype=float))
     geom = world.ids.object_geoms[obj]
     width = 2.0 * _geom_half_extent(model, geom, np.asarray(closing_axis_object, dtype=float))
     closed = world.profile.arms[side].gripper.closed
@@ -304,6 +312,51 @@ def grip(world: World, side: str, obj: str, closing_axis_object: FloatArray) -> 
         impratio=float(model.opt.impratio),
         half_width=width / 2.0,
         pad_friction_wins=bool(wins),
+    )
+
+
+def _dexterous_grip(world: World, side: str, obj: str, closing_axis_object: FloatArray) -> Grip:
+    """A thumb-against-fingers hand's :class:`Grip` on ``obj``: the squeeze of its chains.
+
+    The pads are the chains' contact geoms at the closed targets; the patch the object's
+    overlap with their contact points' spread across the site's x and z (each point widened
+    by its geom's half extent along those axes, the thumb's and the fingers' the smaller).
+    """
+    model = world.model
+    geom = world.ids.object_geoms[obj]
+    width = 2.0 * _geom_half_extent(model, geom, closing_axis_object)
+    try:
+        squeeze = dexterous_squeeze(world, side, width)
+    except ValueError as exc:
+        raise HoldModelUnavailable(str(exc)) from exc
+    data = posed_hand(world, side, tuple(world.profile.arms[side].gripper.closed))
+    rot = data.site_xmat[world.ids.hand_sites[side]].reshape(3, 3)
+    sides = []
+    for thumb in (True, False):
+        chains = [c for c in squeeze.chains if c.thumb == thumb]
+        points = np.array([[c.point[0], c.point[2]] for c in chains])
+        reach = np.array(
+            [
+                (np.abs(rot.T @ data.geom_xmat[c.geom].reshape(3, 3)) @ model.geom_aabb[c.geom, 3:])
+                for c in chains
+            ]
+        )
+        lo = np.min(points - reach[:, [0, 2]], axis=0)
+        hi = np.max(points + reach[:, [0, 2]], axis=0)
+        sides.append(((lo + hi) / 2.0, (hi - lo) / 2.0))
+    pads = tuple(c.geom for c in squeeze.chains)
+    body_pad, body_obj = int(model.geom_bodyid[pads[0]]), int(model.geom_bodyid[geom])
+    return Grip(
+        side=side,
+        force=squeeze.force,
+        pads=pads,
+        pad_centre=np.mean([c for c, _ in sides], axis=0),
+        pad_half=np.min([h for _, h in sides], axis=0),
+        contact=contact_parameters(model, pads[0], geom),
+        inv_weight=float(model.body_invweight0[body_pad, 0] + model.body_invweight0[body_obj, 0]),
+        impratio=float(model.opt.impratio),
+        half_width=width / 2.0,
+        pad_friction_wins=bool(int(model.geom_priority[pads[0]]) > int(model.geom_priority[geom])),
     )
 
 
@@ -930,7 +983,15 @@ def assess_hold(world: World, plan: object, risk_config: RiskConfig, uncertainty
         details: dict[str, float | str] = {"hold_model": f"unavailable: {exc}"}
         return RiskReport("hold", 0.0, (0.0, 1.0), severity, 0.0, details=details)
     p, missed = hold_probability(world, problem, uncertainty)
-    details = {"hold_model": "parallel jaw", **_nominal_facts(world, problem)}
+    slides = all(
+        world.model.jnt_type[int(world.model.actuator_trnid[a, 0])] == mujoco.mjtJoint.mjJNT_SLIDE
+        for acts in world.ids.gripper_actuators.values()
+        for a in acts
+    )
+    details = {
+        "hold_model": "parallel jaw" if slides else "thumb against fingers",
+        **_nominal_facts(world, problem),
+    }
     details["hold_probability"] = p
     details["hold_receiver_miss_probability"] = missed
     return RiskReport("hold", p, (p, p), severity, p, details=details)
