@@ -205,3 +205,58 @@ def test_the_risk_table_and_the_decision_rows_give_the_breach() -> None:
         assert f"breach (book_stack): P {breach['probability']:.4f}" in table
     plain = scenario.loads(SOURCE)
     assert "breach" not in risk_table(plain, "transfer", assess_task(build(plain), plain.mission[0]))
+
+
+def test_the_live_guard_keeps_an_obstacles_own_limit() -> None:
+    """The carry planned with the planner's 2 cm passes the stack at about 2.5 cm: the default
+    guard (1 cm) lets it pass; with the stack's own 5 cm clearance the guard's limit for the stack
+    is max(5 - 1, 5 / 2) = 4 cm and it trips there, naming the stack and its own distance."""
+    from executive.monitoring.live_risk import LiveRiskMonitor, obstacle_guard_limits
+
+    plain = scenario.loads(SOURCE)
+    world = build(plain)
+    plan = plan_alternative(Planner(world), world, plain.mission[0], "left")
+    traj = plan.trajectories["left.transfer"]
+    own = _with_stack("clearance: 0.05")
+    verdicts = {}
+    for label, s in (("default", plain), ("own", own)):
+        estimate = build(s)
+        monitor = LiveRiskMonitor(estimate, s.risk.guard)
+        allow = monitor.collision.step_allow("left", "carry", "book", (), traj.carried)
+        stack = int(estimate.model.geom_bodyid[estimate.ids.obstacle_geoms["book_stack"]])
+        if label == "own":
+            assert obstacle_guard_limits(estimate, s.risk.guard) == {stack: pytest.approx(0.04)}
+        distance = [
+            min(
+                (
+                    p.distance
+                    for p in monitor.collision.knot(q, carried="book", allow=allow).near
+                    if p.env_body == stack
+                ),
+                default=math.inf,
+            )
+            for q in traj.qpos
+        ]
+        k = int(np.argmin(distance))
+        verdicts[label] = (
+            distance[k],
+            monitor.check(
+                traj.qpos[k],
+                traj.qpos,
+                traj.times,
+                float(traj.times[k]),
+                carried="book",
+                allow=allow,
+                com_margin=None,
+            ),
+        )
+    (d_plain, plain_verdict), (d_own, own_verdict) = verdicts["default"], verdicts["own"]
+    assert d_plain == pytest.approx(d_own, abs=1e-12)
+    assert 0.02 < d_plain < 0.04
+    print(
+        f"stack {d_plain * 1000:.1f} mm; default: {plain_verdict.reason or 'ok'}; own: {own_verdict.reason}"
+    )
+    assert plain_verdict.ok, plain_verdict.reason
+    assert not own_verdict.ok and own_verdict.env_body == "book_stack"
+    assert "limit 40 mm, its own from its clearance)" in own_verdict.reason
+    assert own_verdict.min_distance <= d_own + 1e-9  # the pair's own distance (now or ahead)

@@ -15,6 +15,13 @@ The allowances are the planner's and the risk model's (a hand may touch the obje
 it grasps; a carried object its support while lifted or placed), so a planned
 contact does not trip the guard.
 
+An obstacle with its own ``clearance`` c (the planner keeps c from it) has its own distance
+limit, :func:`obstacle_guard_limits`: ``max(c - min_distance, c / 2)``, the planner's clearance
+less the same tracking allowance the defaults give (the planner keeps 2 cm, the guard trips at
+1 cm), never below half of c, so it is never 0. The guard compares ``d - limit + min_distance``
+with ``min_distance`` (the closest pair chosen by that shifted distance,
+:meth:`CollisionModel.knot`'s ``shift``), and reports the pair's own distance and limit.
+
 Cost per tick
 -------------
 The distance at the measured configuration is re-evaluated on every check: exactly, or
@@ -60,6 +67,7 @@ __all__ = [
     "contact_support_margin",
     "foot_contact_rows",
     "interior_margin",
+    "obstacle_guard_limits",
 ]
 
 FloatArray = NDArray[np.float64]
@@ -229,6 +237,12 @@ class LiveRiskMonitor:
         self.world = estimate
         self.config = config
         self.collision = collision_model or CollisionModel(estimate, estimate.scenario.risk)
+        # Obstacles with their own clearance: body id -> metres added to their distances, so
+        # that one comparison with min_distance applies each one's own limit (module doc).
+        limits = obstacle_guard_limits(estimate, config)
+        self._shift = {b: config.min_distance - limit for b, limit in limits.items()}
+        model = self.collision.model
+        self._shift_by_name = {model.body(b).name: v for b, v in self._shift.items()}
         self._object_qpos = [
             slice(adr, adr + 7) for adr in estimate.ids.object_qpos.values()
         ]  # free joints: 3 position + 4 quaternion
@@ -283,8 +297,10 @@ class LiveRiskMonitor:
         if not track.missing:  # all computed (prepare filled the track ahead)
             return
         for k in np.flatnonzero(np.isnan(track.dist[lo:hi])).tolist():
-            knot = self.collision.knot(track.qpos[lo + k], carried=carried, allow=allow, near=False)
-            track.dist[lo + k] = knot.distance
+            knot = self.collision.knot(
+                track.qpos[lo + k], carried=carried, allow=allow, near=False, shift=self._shift
+            )
+            track.dist[lo + k] = self._guard_distance(knot.distance, knot.env_body_name)
             track.names[lo + k] = (knot.robot_body_name, knot.env_body_name)
             track.missing -= 1
             self.knots_computed += 1
@@ -359,7 +375,9 @@ class LiveRiskMonitor:
             if bound >= at_least:
                 self.now_bounded += 1
                 return bound, ref.robot_body, ref.env_body
-        knot = self.collision.knot(now, carried=carried, allow=allow, near=False)  # the least only
+        # the least only
+        knot = self.collision.knot(now, carried=carried, allow=allow, near=False, shift=self._shift)
+        guard_distance = self._guard_distance(knot.distance, knot.env_body_name)
         self.now_exact += 1
         if at_least is not None:
             robot, env = self._movers(carried)
@@ -368,7 +386,7 @@ class LiveRiskMonitor:
                 data.qpos[:] = now
                 mujoco.mj_kinematics(model, data)
             self._now[key] = _NowReference(
-                distance=float(knot.distance),
+                distance=guard_distance,
                 robot_body=knot.robot_body_name,
                 env_body=knot.env_body_name,
                 geoms=geoms,
@@ -377,7 +395,13 @@ class LiveRiskMonitor:
                 rot=data.geom_xmat[geoms].copy(),
                 radius=model.geom_rbound[geoms] * _ROTATION_NORM,
             )
-        return float(knot.distance), knot.robot_body_name, knot.env_body_name
+        return guard_distance, knot.robot_body_name, knot.env_body_name
+
+    def _guard_distance(self, distance: float, env_body: str) -> float:
+        """The distance the guard compares with ``min_distance``: shifted by the body's own
+        limit (module doc); the distance itself for a body without one."""
+        shift = self._shift_by_name.get(env_body)
+        return float(distance) if shift is None else float(distance) + shift
 
     def clearance(
         self,
@@ -391,6 +415,9 @@ class LiveRiskMonitor:
         at_least: float | None = None,
     ) -> tuple[float, float, str, str]:
         """Least distance now and at the planned knots in (t, t + lookahead]: (d, time, robot, env).
+
+        With obstacles of their own clearance, ``d`` is the guard's shifted distance (the module
+        doc): the one compared with ``min_distance``; :meth:`check` reports the pair's own.
 
         ``at_least``: the distance now may be a certified lower bound, if that bound is at least
         this (see :meth:`_now_distance`); None: always exact.
@@ -479,15 +506,33 @@ class LiveRiskMonitor:
             at_least=cfg.min_distance,
         )
         reason = ""
+        shift = self._shift_by_name.get(env_body, 0.0)
         if d < cfg.min_distance:
             when = "now" if at <= t else f"in {at - t:.2f} s"
+            own = ", its own from its clearance" if shift else ""
             reason = (
-                f"guard: {robot_body} would come within {d * 1000:.1f} mm of {env_body} {when} "
-                f"(limit {cfg.min_distance * 1000:.0f} mm)"
+                f"guard: {robot_body} would come within {(d - shift) * 1000:.1f} mm of {env_body} {when} "
+                f"(limit {(cfg.min_distance - shift) * 1000:.0f} mm{own})"
             )
+        if shift:
+            d -= shift  # the verdict gives the pair's own distance
         elif com_margin is not None and com_margin < cfg.min_com_margin:
             reason = (
                 f"guard: centre of mass {com_margin * 1000:.1f} mm inside the support polygon "
                 f"(limit {cfg.min_com_margin * 1000:.0f} mm)"
             )
         return GuardVerdict(not reason, reason, d, at, robot_body, env_body, com_margin)
+
+
+def obstacle_guard_limits(world: World, config: GuardConfig) -> dict[int, float]:
+    """Body id -> the guard's distance limit (m) of each obstacle with its own ``clearance`` c:
+    ``max(c - config.min_distance, c / 2)`` (module doc). Obstacles without one are missing
+    (their limit is ``config.min_distance``)."""
+    model, geoms = world.model, world.ids.obstacle_geoms
+    limits: dict[int, float] = {}
+    for body in world.scenario.scene.obstacles:
+        geom = geoms.get(body.name, -1)
+        if body.clearance is not None and geom >= 0:
+            c = float(body.clearance)
+            limits[int(model.geom_bodyid[geom])] = max(c - config.min_distance, c / 2.0)
+    return limits

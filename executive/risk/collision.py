@@ -601,6 +601,7 @@ class CollisionModel:
         allow: Allow = (),
         broad_phase: bool = True,
         near: bool = True,
+        shift: Mapping[int, float] | None = None,
     ) -> KnotDistance:
         """Closest approach at configuration ``qpos`` (a full qpos of the model).
 
@@ -608,11 +609,16 @@ class CollisionModel:
         nearest broad-phase bound first until no bound is below the best distance, instead of
         every pair within the cutoff first (which the collision probability needs). The same
         least distance, for a fraction of the pairs.
+        ``shift``: environment body id -> metres added to its pairs' distances when choosing
+        the closest pair (a live guard's per-obstacle limit); the distance returned is the
+        chosen pair's own.
         """
         data = self._data
         data.qpos[:] = qpos
         mujoco.mj_kinematics(self.model, data)
-        return self._knot_from_data(data, self._layout(carried, allow), broad_phase, near=near)
+        layout = self._layout(carried, allow)
+        added = np.array([shift.get(b, 0.0) for b in layout.env_body]) if shift else None
+        return self._knot_from_data(data, layout, broad_phase, near=near, shift=added)
 
     def profile(
         self, trajectory: TrajectoryLike, *, allow: Allow = (), broad_phase: bool = True
@@ -679,10 +685,12 @@ class CollisionModel:
         travel: _TravelBound | None = None,
         *,
         near: bool = True,
+        shift: FloatArray | None = None,
     ) -> KnotDistance:
         """:meth:`knot` at the kinematics in ``data``: coal on the broad phase's first pairs, then
         on the pairs beyond them nearest bound first while a bound is below the best distance.
-        ``travel``: the profile's bounds at every knot (at its knot ``k``), told every distance."""
+        ``travel``: the profile's bounds at every knot (at its knot ``k``), told every distance;
+        ``shift``: metres added per environment geom (layout order) when comparing pairs."""
         n_pairs = layout.n_pairs
         if n_pairs == 0:
             raise CollisionModelError("no robot-environment pair is left to check (all allowed)")
@@ -707,8 +715,9 @@ class CollisionModel:
                 record(ei, ri, d)
             if near and d <= cutoff[ei]:
                 near_pairs.append(NearPair(env_body[ei], env_ids[ei], robot_ids[ri], d, np.array(res.normal)))
-            if d < best:
-                best, best_e, best_r = d, ei, ri
+            key = d if shift is None else d + shift[ei]
+            if key < best:
+                best, best_e, best_r = key, ei, ri
                 witness = (
                     np.array(res.getNearestPoint2()),
                     np.array(res.getNearestPoint1()),
@@ -719,7 +728,7 @@ class CollisionModel:
             visit(ei, ri)
         if broad_phase:
             # Pairs beyond the cutoff, nearest bound first, until no bound is below the best.
-            rest = np.where(first, np.inf, bounds)
+            rest = np.where(first, np.inf, bounds if shift is None else bounds + shift[:, None])
             flat = rest.reshape(-1)
             below = np.flatnonzero(flat < best)  # best only falls: no other pair can beat it
             for idx in below[np.argsort(flat[below], kind="stable")].tolist():
@@ -728,6 +737,8 @@ class CollisionModel:
                 ei, ri = divmod(idx, rest.shape[1])
                 self._place_pair(data, layout, placed_e, placed_r, ei, ri)
                 visit(ei, ri)
+        if shift is not None and best_e >= 0:
+            best -= shift[best_e]
         return self._knot_distance(
             best, env_ids[best_e], robot_ids[best_r], witness, checked, n_pairs, near_pairs
         )
