@@ -63,7 +63,8 @@ def via_points(
 ) -> list[FloatArray]:
     """Site positions to pass through (before ``target``) to clear ``obstacles`` (lo, hi boxes).
 
-    Empty when the straight line is clear. Otherwise two points at the height
+    An obstacle wholly above the footprint (a glovebox port's top rim, a lintel) is passed
+    under, not over. Empty when the straight line is clear. Otherwise two points at the height
     where the footprint's bottom is ``clearance`` above the highest blocking
     top: above the last clear sample before the obstacle and the first clear
     sample after it (or above start/target when those are already over it).
@@ -80,7 +81,8 @@ def via_points(
             points[:, 1] + extent.lo[1] < hi[1] + clearance
         )
         below = points[:, 2] + extent.lo[2] < hi[2] + clearance
-        hit = over_x & over_y & below
+        under = points[:, 2] + extent.hi[2] > lo[2] - clearance  # not wholly above the hand
+        hit = over_x & over_y & below & under
         if np.any(hit):
             blocked |= hit
             top = max(top, float(hi[2]))
