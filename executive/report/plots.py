@@ -95,8 +95,9 @@ def risk_table(
         )
         breach = breach_summary(c["collision"])
         if breach is not None:
+            near = f" ({breach['bodies']})" if breach["bodies"] else ""
             lines.append(
-                f"  {'':<15}breach ({breach['bodies']}): P {float(breach['probability']):.4f}, "
+                f"  {'':<15}breach{near}: P {float(breach['probability']):.4f}, "
                 f"exp. loss {float(breach['expected_loss']):.4f}"
             )
         if alt.physics is not None:

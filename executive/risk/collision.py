@@ -953,7 +953,11 @@ def _breach_details(
         miss *= 1.0 - p
     total = sum(breach.values())
     mean = sum(p * model.severity(b) for b, p in breach.items()) / total if total > 0.0 else 0.0
-    names = sorted(model.body_name(b) for b in model.setup.breach_bodies)
+    # the breach bodies with a probability above 0, most likely first
+    touched = sorted(
+        (b for b, p in breach.items() if p > 0.0), key=lambda b: (-breach[b], model.body_name(b))
+    )
+    names = [model.body_name(b) for b in touched]
     return {
         "breach_probability": 1.0 - miss,
         "breach_expected_loss": (1.0 - miss) * mean * factor,
@@ -963,7 +967,8 @@ def _breach_details(
 
 def breach_summary(report: RiskReport) -> dict[str, float | str] | None:
     """The breach part of a collision report, for tables and logs: ``{"probability",
-    "expected_loss", "bodies"}``; None when the scene has no breach obstacle."""
+    "expected_loss", "bodies"}`` (the breach bodies of a probability above 0, most likely
+    first, comma-separated; empty if none); None when the scene has no breach obstacle."""
     details = report.details
     if "breach_probability" not in details:
         return None
