@@ -260,3 +260,14 @@ def test_the_live_guard_keeps_an_obstacles_own_limit() -> None:
     assert not own_verdict.ok and own_verdict.env_body == "book_stack"
     assert "limit 40 mm, its own from its clearance)" in own_verdict.reason
     assert own_verdict.min_distance <= d_own + 1e-9  # the pair's own distance (now or ahead)
+
+
+def test_a_fidelity_variant_keeps_an_obstacles_own_keys(tmp_path: Path) -> None:
+    from executive.validation.variants import base_document, make_variant
+
+    path = tmp_path / "breach.yaml"
+    keys = "      severity: 30\n      clearance: 0.04\n      category: breach\n"
+    path.write_text(SOURCE.replace("      # Optional, per obstacle", keys + "      # Optional, per obstacle"))
+    base = scenario.load(path)
+    stack = make_variant(base, base_document(base), 0, 0).scenario.scene.obstacles[0]
+    assert (stack.severity, stack.clearance, stack.category) == (30.0, 0.04, "breach")

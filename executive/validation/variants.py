@@ -290,6 +290,13 @@ def _body_document(body: Body, resting: bool) -> dict[str, Any]:
         out["rgba"] = [_r(c) for c in body.rgba]
     if body.mass is not None and body.yaw_symmetry != 1:
         out["yaw_symmetry"] = body.yaw_symmetry
+    # An obstacle's own loss and clearance (a variant keeps its breach obstacles' limits).
+    if body.severity is not None:
+        out["severity"] = body.severity
+    if body.clearance is not None:
+        out["clearance"] = body.clearance
+    if body.category != "obstacle":
+        out["category"] = body.category
     return out
 
 
