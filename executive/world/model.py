@@ -18,6 +18,7 @@ free joint per object), under the profile's keyframe name, with the profile's
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Literal
 
 import mujoco
@@ -28,6 +29,7 @@ from executive.errors import WorldError
 from executive.robot.profile import load_profile
 from executive.robot.profile_types import RobotProfile
 from executive.schema.types import Body, Scenario
+from executive.world import model_cache
 
 __all__ = [
     "Grip",
@@ -220,14 +222,14 @@ def build(
     profile = load_profile(scenario.robot.profile)
     mjcf = scenario.robot.mjcf
     try:
-        spec = mujoco.MjSpec.from_file(str(mjcf))
+        spec = model_cache.robot_spec(mjcf)  # a copy of this process's parse of the MJCF
     except Exception as exc:  # mujoco raises ValueError with the parser's text
         raise WorldError(f"{mjcf}: MuJoCo could not load the robot model: {exc}") from exc
 
     key_qpos, key_ctrl = _take_keyframe(spec, profile, str(mjcf))
     _add_hand_sites(spec, profile, str(mjcf))
     _check_names_free(spec, scenario, str(mjcf))
-    _shift_torso_com(spec, profile, pert.com_offset, str(mjcf))
+    _shift_torso_com(spec, profile, pert.com_offset, mjcf)
     # Grasping wants elliptic friction cones with a high impedance ratio (MuJoCo docs, "Contact").
     spec.option.cone = mujoco.mjtCone.mjCONE_ELLIPTIC
     spec.option.impratio = max(spec.option.impratio, 10.0)
@@ -337,27 +339,26 @@ def _check_names_free(spec: mujoco.MjSpec, scenario: Scenario, source: str) -> N
 
 
 def _shift_torso_com(
-    spec: mujoco.MjSpec, profile: RobotProfile, offset: tuple[float, float], source: str
+    spec: mujoco.MjSpec, profile: RobotProfile, offset: tuple[float, float], mjcf: Path
 ) -> None:
     """Move the whole-body CoM by ``offset`` by moving the torso's own CoM (mass-weighted)."""
     if offset == (0.0, 0.0):
         return
     torso = spec.body(profile.torso_body)
     if torso is None:
-        raise WorldError(f"{source}: no body '{profile.torso_body}' (the profile's torso_body)")
-    # Compile once to learn the masses (MjSpec holds only what the file states explicitly).
-    probe = spec.compile()
-    total = float(probe.body_subtreemass[probe.body(profile.base_body).id])
-    torso_mass = float(probe.body_mass[probe.body(profile.torso_body).id])
-    scale = total / torso_mass
+        raise WorldError(f"{mjcf}: no body '{profile.torso_body}' (the profile's torso_body)")
+    # The compiled masses (MjSpec holds only what the file states explicitly): one compile
+    # of the robot per process, kept by the model cache.
+    inertial = model_cache.torso_inertia(mjcf, profile.base_body, profile.torso_body, spec.compile)
+    scale = inertial.total_mass / inertial.mass
     # Shift in the torso frame: at the keyframe the torso is upright and faces +x, so
     # world xy and torso xy agree to first order.
     torso.explicitinertial = True
     if not torso.mass:
-        torso.mass = torso_mass
-        torso.inertia = probe.body_inertia[probe.body(profile.torso_body).id]
-        torso.ipos = probe.body_ipos[probe.body(profile.torso_body).id]
-        torso.iquat = probe.body_iquat[probe.body(profile.torso_body).id]
+        torso.mass = inertial.mass
+        torso.inertia = inertial.inertia
+        torso.ipos = inertial.ipos
+        torso.iquat = inertial.iquat
     torso.ipos = [torso.ipos[0] + offset[0] * scale, torso.ipos[1] + offset[1] * scale, torso.ipos[2]]
 
 
