@@ -5,7 +5,9 @@ accelerations, and while the object does not turn in the jaws far enough to be l
 model, per hand and per knot of the planned trajectories while that hand holds the object:
 
 * Grip force: the jaw servo's force on the object, min(kp |q_contact - q_closed|,
-  forcerange) per finger (a position servo closing on an object it cannot reach).
+  forcerange) per finger (a position servo closing on an object it cannot reach). A hand of
+  hinged fingers against a thumb (the G1's Dex3) gives its chains' squeeze instead
+  (:func:`executive.risk.hand_grip.dexterous_squeeze`), its pads their contact geoms.
 * Contact friction as MuJoCo mixes it (MuJoCo docs, "Contact parameters"): the geom of higher
   ``priority`` gives its parameters; equal priorities take the element-wise maximum friction
   and the solmix-weighted solref/solimp. The truth's friction factor scales the object's
