@@ -89,3 +89,26 @@ def test_press_through_the_right_port_runs_in_physics() -> None:
     result = run_alternative(load("glovebox"), "right", task_index=2, exact=True)
     assert result.outcome == "success", result.message or result.failure
     assert result.sim_time_s > 1.0  # the hold alone is 1 s of simulated time
+
+
+def test_the_sample_stays_inside_the_box(world: World) -> None:
+    """The front wall is reached through, not skirted: the pick holds the can behind it and the
+    place carries it there (a lane in front of the wall would take it out through the port)."""
+    from executive.planning.plan import CompositionConfig
+    from executive.tasks.phases import carry_lane_front
+    from executive.tasks.registry import get
+
+    scenario = world.scenario
+    wall = next(o for o in scenario.scene.obstacles if o.name == "front_wall_lower")
+    inside = wall.position[0] + wall.size[0] / 2  # the wall's inner face
+    pick = scenario.mission[0]
+    steps = get(pick.kind).steps(pick, world, "left", CompositionConfig())
+    carried = [t.position for s in steps if s.carried for t in s.targets]
+    assert carried and min(p[0] for p in carried) > inside + 0.02  # the can's radius and more
+    # the same scene without the rule: the wall (and the roof above) set a lane outside the box
+    can, _ = world.object_pose("can")
+    band = (float(can[1]), 0.25)
+    outside = carry_lane_front(scenario.scene, band, 0.1, 0.0, float(can[0]))
+    assert outside < inside
+    behind = carry_lane_front(scenario.scene, band, 0.1, 0.0, float(can[0]), float(can[0]) - 0.025, 1.13)
+    assert behind > inside

@@ -27,7 +27,8 @@ __all__ = ["MissionDisplay", "final_table", "observed"]
 def final_table(summary: dict[str, Any]) -> str:
     """Chosen alternative, predicted risk and outcome per task."""
     ordering = summary.get("ordering", "value")
-    head = f"{'task':<34}{'chosen':<15}{ordering:>14}{'P(any)':>9}{'approval':>22}  outcome"
+    width = max([34, *(len(t["task"]) + 2 for t in summary["tasks"])])  # a long label widens the column
+    head = f"{'task':<{width}}{'chosen':<15}{ordering:>14}{'P(any)':>9}{'approval':>22}  outcome"
     lines = [head]
     for task in summary["tasks"]:
         risk = task.get("risk") or {}
@@ -44,7 +45,7 @@ def final_table(summary: dict[str, Any]) -> str:
         combined = risk.get("combined")
         combined_text = f"{combined:.4f}" if combined is not None else "-"
         lines.append(
-            f"{task['task']:<34}{task.get('chosen') or '-':<15}"
+            f"{task['task']:<{width}}{task.get('chosen') or '-':<15}"
             f"{value_text:>14}{combined_text:>9}{by:>22}  {outcome}"
         )
     return "\n".join(lines)

@@ -88,13 +88,23 @@ def place(
 
 
 def carry_lane_front(
-    scene: SceneConfig, y_span: tuple[float, float], reach: float, base_x: float, default: float
+    scene: SceneConfig,
+    y_span: tuple[float, float],
+    reach: float,
+    base_x: float,
+    default: float,
+    beyond: float = -np.inf,
+    ceiling: float = np.inf,
 ) -> float:
     """The x of the nearest front face among the obstacles a carry across ``y_span`` would pass.
 
     An obstacle counts when its footprint overlaps the band swept by the carried object
     (``y_span`` widened by ``reach`` either side) and lies ahead of the robot's base; side walls
-    of an enclosure beside the work area do not. ``default`` when none is in the way.
+    of an enclosure beside the work area do not. Nor does one wholly nearer the robot than
+    ``beyond`` (the object's near edge at its start and at its target): the arm reaches past it
+    (the front wall of a glovebox, reached through its ports), so the lane stays behind it;
+    nor one wholly above ``ceiling`` (a roof the hand passes under). ``default`` when none is
+    in the way.
     """
     low, high = min(y_span) - reach, max(y_span) + reach
     fronts = []
@@ -102,7 +112,10 @@ def carry_lane_front(
         half_x = o.size[0] / 2 if o.shape == "box" else o.size[0]
         half_y = o.size[1] / 2 if o.shape == "box" else o.size[0]
         x, y = o.position[0], o.position[1]
-        if y + half_y < low or y - half_y > high or x + half_x <= base_x:
+        half_z = o.size[2] / 2 if o.shape == "box" else o.size[1] / 2 if o.shape == "cylinder" else o.size[0]
+        if y + half_y < low or y - half_y > high or x + half_x <= max(base_x, beyond):
+            continue
+        if o.position[2] - half_z >= ceiling:
             continue
         fronts.append(x - half_x)
     return min(fronts, default=default)
@@ -166,9 +179,9 @@ def one_hand_leg(
     carry_z = max(grasp[2] + cfg.lift_height, place_at[2] + cfg.approach_height)
     length = body.size[0] if body.shape == "box" else 2 * body.size[0]
     scene = h.world.scenario.scene
-    front_x = carry_lane_front(
-        scene, (pos[1], centre[1]), length / 2 + cfg.obstacle_clearance, h.base[0], pos[0]
-    )
+    reach, near = length / 2 + cfg.obstacle_clearance, min(pos[0], centre[0]) - length / 2
+    above = carry_z + cfg.approach_height  # the hand and wrist over the carried object
+    front_x = carry_lane_front(scene, (pos[1], centre[1]), reach, h.base[0], pos[0], near, above)
     lane_x = min(front_x - cfg.obstacle_clearance - length / 2, grasp[0], place_at[0])
     lane = (np.array([lane_x, grasp[1], carry_z]), np.array([lane_x, place_at[1], carry_z]))
     back: tuple[Step, ...] = ()

@@ -126,6 +126,8 @@ def hold_point(
         half + cfg.obstacle_clearance,
         float(h.base[0]),
         float(lift[0]),
+        beyond=float(lift[0]) - half,
+        ceiling=float(lift[2]) + cfg.approach_height,
     )
     return np.array([min(front - cfg.obstacle_clearance - half, float(lift[0])), home_y, float(lift[2])])
 
@@ -273,8 +275,14 @@ def place_steps(world: World, task: PlaceTask, side: str, cfg: CompositionConfig
     # if it is held lower: a hand held high (at a handover) reaches less far across the body.
     carry_z = max(min(site[2], place_at[2] + cfg.lift_height), place_at[2] + cfg.approach_height)
     half = _length(body) / 2
+    near = min(float(pos[0]), float(target.centre[0])) - half
     front = carry_lane_front(
-        world.scenario.scene, (pos[1], target.centre[1]), half + cfg.obstacle_clearance, h.base[0], pos[0]
+        world.scenario.scene,
+        (pos[1], target.centre[1]),
+        half + cfg.obstacle_clearance,
+        h.base[0],
+        pos[0],
+        near,
     )
     lane_x = min(front - cfg.obstacle_clearance - half, place_at[0])
     lane = (np.array([lane_x, site[1], carry_z]), np.array([lane_x, place_at[1], carry_z]))
