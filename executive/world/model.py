@@ -8,8 +8,9 @@ runs, sampled from the scenario's ``uncertainty`` block with an injected
 ``numpy.random.Generator``. The planner and the risk models only ever see the
 estimate.
 
-The robot's MJCF is loaded with ``mujoco.MjSpec`` and the scene is added to
-its world body, so any robot model with a profile works. The robot's standing
+The robot's MJCF is loaded with ``mujoco.MjSpec`` (a copy of the process's cached
+parse, :mod:`executive.world.model_cache`) and the scene is added to its world body,
+so any robot model with a profile works. The robot's standing
 keyframe is re-created over the whole world (robot joints first, then one
 free joint per object), under the profile's keyframe name, with the profile's
 ``home_joints`` angles and every hand at its open pose: the home pose.
