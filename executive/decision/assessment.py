@@ -47,6 +47,7 @@ from executive.risk.grasp import (
     hand_pose_at,
 )
 from executive.risk.hold import assess_hold
+from executive.risk.pinch import closing_shift, horizontal_shift, placement_tolerance
 from executive.risk.press import press_forces
 from executive.risk.push import assess_placement, plan_forces
 from executive.risk.report import RiskReport
@@ -247,8 +248,12 @@ def _grasp(
     mode's failures include a placement beyond the failure detector's
     ``place_position_tol``; the same error ``e`` fails the grasp when ``|e|`` exceeds the
     lateral tolerance, so the union of the two is ``|e| > min(lateral, place_position_tol)``
-    (exact: nested events of one Gaussian, not a bound). ``places`` False (a pick that keeps the
-    object): no placement, the lateral tolerance is the grasp's own.
+    (exact: nested events of one Gaussian, not a bound). A thumb-against-fingers hand holds
+    the object off its site across the jaws (:func:`executive.risk.pinch.closing_shift`); that
+    shift's table-plane part ``mu`` lands on the target too, and the placement's bound on
+    ``|e|`` becomes sqrt(place_position_tol^2 - mu^2) (:func:`executive.risk.pinch.placement_tolerance`;
+    slide jaws: mu = 0). ``places`` False (a pick that keeps the object): no placement, the
+    lateral tolerance is the grasp's own.
 
     Across the jaws, the hand must clear the object's sides all the way down, not only at
     the grasp pose: ``path`` (the grasping hand's poses before the grasp, e.g. its pre-grasp
@@ -263,17 +268,19 @@ def _grasp(
     mujoco.mju_quat2Mat(rotation, obj_quat)
     planned = grasp_error(hand_pos, hand_rot, obj_pos, rotation.reshape(3, 3))
     full = grasp_tolerance(world, side, obj)
+    shift = closing_shift(world, side, obj) if places else 0.0
+    mu = horizontal_shift(shift, hand_rot)
     tolerance = GraspTolerance(
         max(0.0, full.closing - abs(planned.closing)),
         min(
             max(0.0, full.lateral - abs(planned.lateral)),
-            DetectorThresholds().place_position_tol if places else np.inf,
+            placement_tolerance(DetectorThresholds().place_position_tol, mu) if places else np.inf,
         ),
         max(0.0, full.yaw - abs(planned.yaw)),
     )
     # The intended grasp point: where the hand is, at the object's height.
     reference = np.array([hand_pos[0], hand_pos[1], obj_pos[2]])
-    return assess_grasp(
+    report = assess_grasp(
         world,
         side,
         obj,
@@ -284,6 +291,10 @@ def _grasp(
         tolerance=tolerance,
         approach=approach_envelope(world, side, obj, path),
     )
+    if shift == 0.0:
+        return report
+    details: dict[str, float | str] = {**report.details, "pinch_shift": shift, "placement_shift": mu}
+    return replace(report, details=details)
 
 
 def assess_task(

@@ -49,6 +49,7 @@ __all__ = [
     "grasp_tolerance",
     "half_extent",
     "hand_pose_at",
+    "has_slide_jaws",
     "logistic_risk",
     "seed_grasp_risk",
     "shake_test",
@@ -201,6 +202,18 @@ def _is_axisymmetric(model: mujoco.MjModel, geom: int, rotation: FloatArray) -> 
     return kind == mujoco.mjtGeom.mjGEOM_CYLINDER and abs(float(rotation[2, 2])) > 0.99
 
 
+def has_slide_jaws(world: World, side: str) -> bool:
+    """Whether the ``side`` gripper's actuators all drive slide joints (parallel jaws, as the
+    bundled humanoid's), not a dexterous hand's hinges (the G1's Dex3)."""
+    model = world.model
+    acts = world.ids.gripper_actuators[side]
+    return bool(acts) and all(
+        model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
+        and model.jnt_type[int(model.actuator_trnid[a, 0])] == mujoco.mjtJoint.mjJNT_SLIDE
+        for a in acts
+    )
+
+
 def grasp_tolerance(
     world: World,
     side: str,
@@ -227,13 +240,7 @@ def grasp_tolerance(
         raise ValueError(f"grasp_tolerance: no object '{obj}'; objects: {sorted(world.ids.object_geoms)}")
     if jaw_opening is None:
         grip = world.profile.arms[side].gripper
-        acts = world.ids.gripper_actuators[side]
-        joints = [int(model.actuator_trnid[a, 0]) for a in acts]
-        if acts and all(
-            model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
-            and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE
-            for a, j in zip(acts, joints, strict=True)
-        ):
+        if has_slide_jaws(world, side):
             jaw_opening = float(sum(abs(o - c) for o, c in zip(grip.open, grip.closed, strict=True)))
         else:  # a dexterous hand: the opening its open fingers and thumb leave, measured
             jaw_opening = hand_span(world, side).opening

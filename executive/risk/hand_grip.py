@@ -27,10 +27,21 @@ kinematics, ``mj_jac``):
   actuatorfrcrange, which MuJoCo clamps the joint's actuator force to), and the squeeze is at
   most the weaker side's sum of those.
 
+* Pinch centre: closing, the hand moves the object to where the two sides' forces balance,
+  whatever its offset across the site before (as long as both sides reach it). With the
+  object centred at ``s`` on the closing axis each chain presses min(cap, k max(0, delta -
+  s)) (thumb) or min(cap, k max(0, delta + s)) (fingers), delta its interference at s = 0;
+  the thumb's total falls and the fingers' rises with s, and the equilibrium is their
+  crossing (bisection; the middle of the span where both are saturated and equal). Unequal
+  thumb and finger reach (the Dex3's thumb passes the site, its fingers stop short of it)
+  puts that centre off the site: the object is carried, and placed, that far from where the
+  hand aims.
+
 Usage::
 
     squeeze = dexterous_squeeze(world, "left", width=0.09)
     squeeze.force  # N, normal force of each side on the object
+    pinch_centre(world, "left", 0.09)  # m along the site's +y where the closed hand holds it
 """
 
 from __future__ import annotations
@@ -44,7 +55,7 @@ from numpy.typing import NDArray
 from executive.risk.hand_span import FAN_HALF_WIDTH, hand_collision_geoms, posed_hand
 from executive.world.model import World
 
-__all__ = ["Chain", "Squeeze", "dexterous_squeeze", "hand_chains"]
+__all__ = ["Chain", "Squeeze", "dexterous_squeeze", "hand_chains", "pinch_centre"]
 
 FloatArray = NDArray[np.float64]
 
@@ -221,3 +232,59 @@ def dexterous_squeeze(world: World, side: str, width: float) -> Squeeze:
     spring = max(0.0, (p_t * k_f + p_f * k_t) / (k_t + k_f))
     caps = {thumb: sum(c.force_cap for c in chains if c.thumb == thumb) for thumb in (True, False)}
     return Squeeze(width, float(min(spring, caps[True], caps[False])), chains)
+
+
+def _side_force(chains: tuple[Chain, ...], thumb: bool, width: float, shift: float) -> float:
+    """Total force (N) of one side's chains on an object ``width`` wide centred at ``shift`` (site y)."""
+    total = 0.0
+    for c in chains:
+        if c.thumb != thumb:
+            continue
+        y = float(c.point[1])
+        inside = (width / 2.0 + y - shift) if thumb else (width / 2.0 - y + shift)
+        total += min(c.force_cap, c.stiffness * max(0.0, inside))
+    return total
+
+
+def pinch_centre(world: World, side: str, width: float, *, tol: float = 1e-7) -> float:
+    """Where along the site's closing axis (+y, thumb to fingers) the closed ``side`` hand holds
+    an object ``width`` wide: the offset (m) of the object's centre from the hand site at which
+    the thumb's and the fingers' forces balance (see the module docstring).
+
+    Args:
+        world: the world whose robot has the hand (its profile's closed targets are used).
+        side: the arm.
+        width: the object's extent across the closing axis (m).
+        tol: bisection's stopping width (m).
+
+    Returns:
+        The offset; 0.0 when the closed hand does not reach the object (no squeeze, no shift).
+
+    Raises:
+        ValueError: the hand is not a thumb against fingers (:func:`hand_chains`).
+    """
+    chains = hand_chains(world, side)
+    ys = [float(c.point[1]) for c in chains]
+    lo, hi = min(ys) - width, max(ys) + width  # thumb's force is 0 above hi, fingers' 0 below lo
+
+    def excess(s: float) -> float:
+        return _side_force(chains, True, width, s) - _side_force(chains, False, width, s)
+
+    if dexterous_squeeze(world, side, width).force <= 0.0:
+        return 0.0
+    a, b = lo, hi  # excess(a) >= 0 >= excess(b); non-increasing in s
+    while b - a > tol:
+        m = 0.5 * (a + b)
+        if excess(m) > 0.0:
+            a = m
+        else:
+            b = m
+    left = 0.5 * (a + b)
+    a, b = lo, hi  # the other end of a flat zero span: the last s with excess >= 0
+    while b - a > tol:
+        m = 0.5 * (a + b)
+        if excess(m) >= 0.0:
+            a = m
+        else:
+            b = m
+    return float(0.5 * (left + 0.5 * (a + b)))
