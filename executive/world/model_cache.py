@@ -164,9 +164,12 @@ def _entry(mjcf: Path | str) -> _Entry:
         if entry is not None and entry.stamp == _stamp(entry.files):
             _entries.move_to_end(path)
             return entry
+    before = _stat(path)
     spec = mujoco.MjSpec.from_file(path)
     files = _files(path, spec)
     entry = _Entry(files, _stamp(files), spec)
+    if entry.stamp[0][1:] != before:  # written while being read: use it, keep nothing
+        return entry
     with _lock:
         _entries[path] = entry
         _entries.move_to_end(path)
