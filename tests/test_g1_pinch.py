@@ -11,31 +11,17 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_g1_dex3 import _lift as lift  # tests/ is on sys.path (pytest's default prepend import mode)
 
-from executive.execution.runner import execute_plan
-from executive.planning.planner import Planner
 from executive.risk.pinch import closing_shift, placement_tolerance
-from executive.scenario import load, loads
-from executive.tasks.steps import plan_alternative
+from executive.scenario import load
 from executive.world.model import build
-
-BOOK = "0.14, 0.09, 0.04"
 
 
 def _held_offset(text: str, width: float) -> tuple[float, float]:
     """Lift a book ``width`` wide with the left hand (exact truth): the book's centre along the
     site's closing axis (m) in physics, and the model's closing shift on the estimate."""
-    scenario = loads(text.replace(BOOK, f"0.14, {width}, 0.04"), source="g1_pinch.yaml")
-    estimate, truth = build(scenario), build(scenario)
-    plan = plan_alternative(Planner(estimate), estimate, scenario.mission[0], "left")
-    end = 0.0
-    for step in plan.steps:
-        end += (
-            plan.trajectories[step.name].duration if step.name in plan.trajectories else 0.0
-        ) + step.hold_s
-        if step.name == "left.lift":
-            break
-    result = execute_plan(plan, truth, scenario.mission[0], time_limit_s=end + 0.5)
+    estimate, truth, result = lift(text, width)
     assert result.failure is None
     data, site = truth.data, truth.ids.hand_sites["left"]
     book = data.xpos[truth.ids.object_bodies["book"]]
