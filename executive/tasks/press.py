@@ -153,36 +153,31 @@ class PressKind(TaskKind):
 
         The hand closes (a fist) as the first motion starts and opens again as it goes home.
         """
-        from dataclasses import replace
-
         from behaviours.press import Press, SetGripper
         from executive.tasks.steps import build_subtree
 
         task = plan.task
         assert isinstance(task, PressTask)
         side = plan.steps[0].side
-        children: list[py_trees.behaviour.Behaviour] = [SetGripper(f"{side}.fist", side, closed=True)]
-        for step in plan.steps:
-            if step.kind == "home":
-                children.append(SetGripper(f"{side}.open", side, closed=False))
-            if step.kind == "press":
-                children.append(
-                    Press(
-                        step.name,
-                        plan.trajectories[step.name],
-                        side=step.side,
-                        target=task.target,
-                        standoff=self.standoff,
-                        force=task.force,
-                        hold_s=step.hold_s,
-                        tolerance=task.tolerance,
-                    )
-                )
-                continue
-            part = build_subtree(replace(plan, steps=(step,)), guard=guard)
-            moved = list(part.children)
-            part.remove_all_children()
-            children.extend(moved)
+
+        def press(step: Step) -> py_trees.behaviour.Behaviour:
+            return Press(
+                step.name,
+                plan.trajectories[step.name],
+                side=step.side,
+                target=task.target,
+                standoff=self.standoff,
+                force=task.force,
+                hold_s=step.hold_s,
+                tolerance=task.tolerance,
+            )
+
+        built = build_subtree(plan, guard=guard, make={"press": press})
+        children = list(built.children)  # one per step: a press has no grasp, so no handover
+        built.remove_all_children()
+        home = [s.kind for s in plan.steps].index("home")
+        children.insert(home, SetGripper(f"{side}.open", side, closed=False))
+        children.insert(0, SetGripper(f"{side}.fist", side, closed=True))
         return py_trees.composites.Sequence(name=plan.name, memory=True, children=children)
 
     def verify(self, task: Task, world: World, detector: object) -> Verdict | None:

@@ -10,6 +10,8 @@ wrapped in a live risk guard).
 
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
+
 import numpy as np
 import py_trees
 from numpy.typing import NDArray
@@ -93,11 +95,17 @@ def check_grasps(world: World, steps: list[Step], table_clearance: float, grip_d
         on_table = False
 
 
-def build_subtree(plan: AlternativePlan, *, guard: bool = False) -> py_trees.composites.Sequence:
+def build_subtree(
+    plan: AlternativePlan,
+    *,
+    guard: bool = False,
+    make: Mapping[str, Callable[[Step], py_trees.behaviour.Behaviour]] | None = None,
+) -> py_trees.composites.Sequence:
     """The alternative as a py_trees Sequence of task-level behaviours (a handover is its own subtree).
 
     ``guard``: wrap every motion in a :class:`behaviours.guard.RiskGuard` (live risk checks,
-    active when a monitor is on the blackboard).
+    active when a monitor is on the blackboard). ``make``: a task kind's own behaviour for
+    steps of a kind of its own (a press), by step kind.
     """
     from behaviours.gripper import Grasp, Release
     from behaviours.guard import RiskGuard
@@ -119,6 +127,10 @@ def build_subtree(plan: AlternativePlan, *, guard: bool = False) -> py_trees.com
     i = 0
     while i < len(steps):
         step = steps[i]
+        if make is not None and step.kind in make:
+            children.append(make[step.kind](step))
+            i += 1
+            continue
         if step.kind == "grasp" and i + 2 < len(steps) and steps[i + 1].kind == "release":
             # receiver grasps, giver releases, giver retreats: the handover
             release, retreat = steps[i + 1], steps[i + 2]
