@@ -1,41 +1,9 @@
 """The squeeze of a dexterous hand (a thumb against fingers) on an object, from its servos.
 
 A hand like the G1's Dex3 has no slide jaws whose servo error gives the grip force. Its
-force is read off the model at the profile's closed gripper targets (MuJoCo forward
-kinematics, ``mj_jac``):
-
-* Sides: the hand's moving links (those below its root body) whose collision geoms lie on
-  the site's -y side at the open targets are the thumb's; those on +y the fingers'.
-  Each leaf link starts one chain (thumb, index, middle), its ancestors up to the root.
-* Contact point of a chain: its innermost mesh vertex (towards the other side) in the
-  region an object between the jaws fills: at or below the site along the approach (z >= 0)
-  and within the rays' fan across it (|x| <= ``FAN_HALF_WIDTH``).
-* Interference: the object of width w spans |y| <= w / 2 about the site; a chain's closed
-  contact point lies ``delta = w / 2 + y`` (thumb) or ``w / 2 - y`` (fingers) inside it
-  (> 0: the servo's target is past the face). One side's delta may be negative: the other
-  pushes the object over to it, and the hand grips while the sum is positive.
-* Stiffness of a chain along the closing axis n at its contact point: the position servos
-  are joint springs kp, so the tip's compliance is n^T J Kp^-1 J^T n (Cartesian stiffness of
-  a serial chain; Salisbury 1980, "Active stiffness control of a manipulator in Cartesian
-  coordinates"), J the point's translational Jacobian over the chain's joints.
-* Squeeze: the object shifts along n until the two sides' forces balance; with each side's
-  chains in parallel (k_s = sum k_i, preload sum k_i delta_i) the force is F = (P_t k_f + P_f
-  k_t) / (k_t + k_f) for preloads P and stiffnesses k of thumb and fingers (two springs in
-  series against each other: k_t k_f (delta_t + delta_f) / (k_t + k_f) for one chain a side), 0
-  when the object is narrower than the closed hand. Servos saturate: a chain presses at most
-  min_i limit_i / |n^T J_i| over its joints (limit_i the actuator's forcerange or the joint's
-  actuatorfrcrange, which MuJoCo clamps the joint's actuator force to), and the squeeze is at
-  most the weaker side's sum of those.
-
-* Pinch centre: closing, the hand moves the object to where the two sides' forces balance,
-  whatever its offset across the site before (as long as both sides reach it). With the
-  object centred at ``s`` on the closing axis each chain presses min(cap, k max(0, delta -
-  s)) (thumb) or min(cap, k max(0, delta + s)) (fingers), delta its interference at s = 0;
-  the thumb's total falls and the fingers' rises with s, and the equilibrium is their
-  crossing (bisection; the middle of the span where both are saturated and equal). Unequal
-  thumb and finger reach (the Dex3's thumb passes the site, its fingers stop short of it)
-  puts that centre off the site: the object is carried, and placed, that far from where the
-  hand aims.
+force (:func:`dexterous_squeeze`) and where it holds an object across the site
+(:func:`pinch_centre`) are read off the model at the profile's closed gripper targets
+(MuJoCo forward kinematics, ``mj_jac``); the model is in those functions' docstrings.
 
 Usage::
 
@@ -211,6 +179,29 @@ def hand_chains(world: World, side: str) -> tuple[Chain, ...]:
 def dexterous_squeeze(world: World, side: str, width: float) -> Squeeze:
     """Normal force (N) of each side of the ``side`` hand closed on an object ``width`` wide.
 
+    * Sides: the hand's moving links (those below its root body) whose collision geoms lie on
+      the site's -y side at the open targets are the thumb's; those on +y the fingers'.
+      Each leaf link starts one chain (thumb, index, middle), its ancestors up to the root.
+    * Contact point of a chain: its innermost mesh vertex (towards the other side) in the
+      region an object between the jaws fills: at or below the site along the approach (z >= 0)
+      and within the rays' fan across it (|x| <= ``FAN_HALF_WIDTH``).
+    * Interference: the object of width w spans |y| <= w / 2 about the site; a chain's closed
+      contact point lies ``delta = w / 2 + y`` (thumb) or ``w / 2 - y`` (fingers) inside it
+      (> 0: the servo's target is past the face). One side's delta may be negative: the other
+      pushes the object over to it, and the hand grips while the sum is positive.
+    * Stiffness of a chain along the closing axis n at its contact point: the position servos
+      are joint springs kp, so the tip's compliance is n^T J Kp^-1 J^T n (Cartesian stiffness of
+      a serial chain; Salisbury 1980, "Active stiffness control of a manipulator in Cartesian
+      coordinates"), J the point's translational Jacobian over the chain's joints.
+    * Squeeze: the object shifts along n until the two sides' forces balance; with each side's
+      chains in parallel (k_s = sum k_i, preload sum k_i delta_i) the force is F = (P_t k_f + P_f
+      k_t) / (k_t + k_f) for preloads P and stiffnesses k of thumb and fingers (two springs in
+      series against each other: k_t k_f (delta_t + delta_f) / (k_t + k_f) for one chain a side), 0
+      when the object is narrower than the closed hand. Servos saturate: a chain presses at most
+      min_i limit_i / |n^T J_i| over its joints (limit_i the actuator's forcerange or the joint's
+      actuatorfrcrange, which MuJoCo clamps the joint's actuator force to), and the squeeze is at
+      most the weaker side's sum of those.
+
     Args:
         world: the world whose robot has the hand (its profile's closed targets are used).
         side: the arm.
@@ -249,7 +240,17 @@ def _side_force(chains: tuple[Chain, ...], thumb: bool, width: float, shift: flo
 def pinch_centre(world: World, side: str, width: float, *, tol: float = 1e-7) -> float:
     """Where along the site's closing axis (+y, thumb to fingers) the closed ``side`` hand holds
     an object ``width`` wide: the offset (m) of the object's centre from the hand site at which
-    the thumb's and the fingers' forces balance (see the module docstring).
+    the thumb's and the fingers' forces balance.
+
+    * Pinch centre: closing, the hand moves the object to where the two sides' forces balance,
+      whatever its offset across the site before (as long as both sides reach it). With the
+      object centred at ``s`` on the closing axis each chain presses min(cap, k max(0, delta -
+      s)) (thumb) or min(cap, k max(0, delta + s)) (fingers), delta its interference at s = 0;
+      the thumb's total falls and the fingers' rises with s, and the equilibrium is their
+      crossing (bisection; the middle of the span where both are saturated and equal). Unequal
+      thumb and finger reach (the Dex3's thumb passes the site, its fingers stop short of it)
+      puts that centre off the site: the object is carried, and placed, that far from where the
+      hand aims.
 
     Args:
         world: the world whose robot has the hand (its profile's closed targets are used).
