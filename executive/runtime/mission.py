@@ -218,6 +218,8 @@ class Executive:
         self.wall_s = 0.0
         self.outcome: str | None = None  # success | failed | aborted
         self._summary: dict[str, Any] | None = None
+        #: Called with the executive after every tick (and its physics step): recorders, consoles.
+        self.tick_listeners: list[Callable[[Executive], None]] = []
         self._install()
         self.tree.setup()
         self.log.record(
@@ -289,6 +291,8 @@ class Executive:
                 spare = self.robot.control_dt - (time.perf_counter() - t0)
                 if spare > 0:
                     time.sleep(spare)
+        for listener in self.tick_listeners:
+            listener(self)
         if self.status != Status.RUNNING:
             self._finish("success" if self.status == Status.SUCCESS else self._failed_outcome())
         return self.status
