@@ -1,5 +1,6 @@
-"""The bundled glovebox scenario: it loads, its breach obstacles frame the documented ports, and
-the press through the right port plans on the estimate and runs in MuJoCo (issue 17)."""
+"""The bundled glovebox scenario: it loads, its breach obstacles frame the documented ports, the
+press through the right port and the regrasp between the ports plan on the estimate and run in
+MuJoCo, and the can never leaves the box (issue 17)."""
 
 from __future__ import annotations
 
@@ -13,8 +14,15 @@ from executive.scenario.loader import load
 from executive.world.model import World, build
 
 #: The openings the scenario's header documents (m): across (y) and high (z), and their centres.
-PORT_WIDTH, PORT_HEIGHT, PORT_Y, PORT_Z = 0.40, 0.36, 0.25, 1.09
-RIMS = ("top", "bottom", "inner", "outer")
+PORT_WIDTH, PORT_HEIGHT, PORT_Y, PORT_Z = 0.40, 0.40, 0.22, 1.11
+BREACH = {
+    "window",
+    "port_rim_top",
+    "port_rim_bottom",
+    "port_mullion",
+    "left_port_rim_outer",
+    "right_port_rim_outer",
+}
 
 
 @pytest.fixture(scope="module")
@@ -35,53 +43,70 @@ def _box(world: World, name: str) -> tuple[np.ndarray, np.ndarray]:
 
 def test_scenario_validates_with_a_three_task_mission() -> None:
     scenario = load("glovebox")
-    assert [t.kind for t in scenario.mission] == ["pick", "place", "press"]
+    assert [t.kind for t in scenario.mission] == ["press", "transfer", "press"]
+    assert scenario.mission[1].alternatives[0] == "right_regrasp_left"
     assert len(scenario.scene.objects) == 1 and scenario.scene.objects[0].shape == "cylinder"
 
 
 @pytest.mark.parametrize("side", ["left", "right"])
 def test_port_opening_measured_from_the_rims(world: World, side: str) -> None:
-    """The opening between the rims' inner faces is at least the documented size, where documented."""
-    box = {rim: _box(world, f"{side}_port_rim_{rim}") for rim in RIMS}
+    """The opening between the rims' inner faces is the documented size, where documented."""
     sign = 1.0 if side == "left" else -1.0
-    inner, outer = box["inner"], box["outer"]
-    near, far = (inner[1][1], outer[0][1]) if side == "left" else (outer[1][1], inner[0][1])
-    width = far - near
-    height = box["top"][0][2] - box["bottom"][1][2]
-    assert width >= PORT_WIDTH - 1e-9 and height >= PORT_HEIGHT - 1e-9
+    top, bottom = _box(world, "port_rim_top"), _box(world, "port_rim_bottom")
+    mullion, outer = _box(world, "port_mullion"), _box(world, f"{side}_port_rim_outer")
+    near, far = (mullion[1][1], outer[0][1]) if side == "left" else (outer[1][1], mullion[0][1])
+    assert far - near == pytest.approx(PORT_WIDTH, abs=1e-9)
+    assert top[0][2] - bottom[1][2] == pytest.approx(PORT_HEIGHT, abs=1e-9)
     assert (near + far) / 2 == pytest.approx(sign * PORT_Y, abs=1e-9)
-    assert (box["top"][0][2] + box["bottom"][1][2]) / 2 == pytest.approx(PORT_Z, abs=1e-9)
-    # All four rims stand in the front wall's plane, one thickness, the window right above.
-    xs = {(round(lo[0], 9), round(hi[0], 9)) for lo, hi in box.values()}
-    assert len(xs) == 1
+    assert (top[0][2] + bottom[1][2]) / 2 == pytest.approx(PORT_Z, abs=1e-9)
+    # The rims stand in the front wall's plane, one thickness, the window right above.
+    xs = {(round(lo[0], 9), round(hi[0], 9)) for lo, hi in (top, bottom, mullion, outer)}
     window = _box(world, "window")
-    assert window[0][2] == pytest.approx(box["top"][1][2], abs=1e-9)
-    assert (round(window[0][0], 9), round(window[1][0], 9)) in xs
+    assert len(xs) == 1 and (round(window[0][0], 9), round(window[1][0], 9)) in xs
+    assert window[0][2] == pytest.approx(top[1][2], abs=1e-9)
 
 
-def test_severity_tiers(world: World) -> None:
-    """Window and rims are breaches with the highest severity; walls lower; a drop lower still."""
+def test_severity_and_clearance_tiers(world: World) -> None:
+    """Window and rims are breaches with the highest severity; walls lower; a drop lower still.
+    The rims may be passed at 2 cm, the window at no less than 5 cm."""
     scenario = world.scenario
     by_name = {o.name: o for o in scenario.scene.obstacles}
     breach = {n for n, o in by_name.items() if o.category == "breach"}
-    assert breach == {"window"} | {f"{s}_port_rim_{r}" for s in ("left", "right") for r in RIMS}
+    assert breach == BREACH
     default = scenario.risk.severity.collision
     walls = [o.severity or default for n, o in by_name.items() if n not in breach]
     lowest_breach = min(by_name[n].severity or default for n in breach)
     assert lowest_breach > max(walls) > scenario.risk.severity.drop
+    assert by_name["window"].clearance == 0.05
+    assert {by_name[n].clearance for n in breach - {"window"}} == {0.02}
 
 
 def test_route_passes_under_an_obstacle_above_the_hand() -> None:
     """A hand's straight way under a lintel needs no via; a wall across it needs two, over its top."""
     extent = Footprint(np.array([-0.05, -0.1, -0.05]), np.array([0.05, 0.1, 0.1]))
     start, target = np.array([0.3, 0.0, 1.0]), np.array([0.7, 0.0, 1.0])
-    lintel = (np.array([0.49, -0.5, 1.2]), np.array([0.51, 0.5, 1.5]))
+    lintel = (np.array([0.49, -0.5, 1.4]), np.array([0.51, 0.5, 1.5]))
     assert via_points(start, target, extent, [lintel], clearance=0.04) == []
     wall = (np.array([0.49, -0.5, 0.8]), np.array([0.51, 0.5, 1.1]))
     vias = via_points(start, target, extent, [lintel, wall], clearance=0.04)
     assert len(vias) == 2
     # Closed form: the footprint's bottom (-0.05) clears the wall's top (1.1) by the clearance.
     assert vias[0][2] == pytest.approx(1.1 + 0.04 + 0.05) and vias[1][2] == pytest.approx(1.19)
+
+
+def test_no_way_over_a_port_side_with_the_wall_above() -> None:
+    """A hand passing close beside a port's side rim would be lifted over it, into the rim
+    above the port: no via points then (the hand goes straight, along the opening), where the
+    side rim alone gets two."""
+    extent = Footprint(np.array([-0.05, -0.1, -0.05]), np.array([0.05, 0.1, 0.1]))
+    start, target = np.array([0.3, 0.0, 0.93]), np.array([0.7, 0.0, 1.03])
+    side = (np.array([0.43, 0.12, 0.91]), np.array([0.45, 0.16, 1.27]))  # within 4 cm of the hand
+    vias = via_points(start, target, extent, [side], clearance=0.04)
+    # Closed form: the footprint's bottom (-0.05) clears the side rim's top (1.27) by 0.04.
+    assert len(vias) == 2 and vias[0][2] == pytest.approx(1.27 + 0.04 + 0.05)
+    top = (np.array([0.43, -0.5, 1.27]), np.array([0.45, 0.5, 1.31]))  # above the straight way
+    assert via_points(start, target, extent, [top], clearance=0.04) == []
+    assert via_points(start, target, extent, [side, top], clearance=0.04) == []
 
 
 def test_press_through_the_right_port_runs_in_physics() -> None:
@@ -91,23 +116,40 @@ def test_press_through_the_right_port_runs_in_physics() -> None:
     assert result.sim_time_s > 1.0  # the hold alone is 1 s of simulated time
 
 
+def test_regrasp_between_the_ports_runs_in_physics() -> None:
+    """Task 1, exact truth: the right hand sets the can down between the ports, the left takes it
+    to the bag-out; it ends within the placement tolerance of its target."""
+    scenario = load("glovebox")
+    result = run_alternative(scenario, "right_regrasp_left", task_index=1, exact=True)
+    assert result.outcome == "success", result.message or result.failure
+    assert result.placement_error_m is not None and result.placement_error_m < 0.02
+
+
 def test_the_sample_stays_inside_the_box(world: World) -> None:
-    """The front wall is reached through, not skirted: the pick holds the can behind it and the
-    place carries it there (a lane in front of the wall would take it out through the port)."""
+    """The front wall is reached through, not skirted: every carry of the regrasp keeps the can
+    behind it, and each hand goes in and out along its own line, straight ahead of its home pose
+    through its own port (a lane in front of the wall would take the can out through a port)."""
     from executive.planning.plan import CompositionConfig
+    from executive.tasks.hands import HandFrames
     from executive.tasks.phases import carry_lane_front
     from executive.tasks.registry import get
 
     scenario = world.scenario
     wall = next(o for o in scenario.scene.obstacles if o.name == "front_wall_lower")
     inside = wall.position[0] + wall.size[0] / 2  # the wall's inner face
-    pick = scenario.mission[0]
-    steps = get(pick.kind).steps(pick, world, "left", CompositionConfig())
+    transfer = scenario.mission[1]
+    steps = get(transfer.kind).steps(transfer, world, "right_regrasp_left", CompositionConfig())
     carried = [t.position for s in steps if s.carried for t in s.targets]
-    assert carried and min(p[0] for p in carried) > inside + 0.02  # the can's radius and more
+    assert carried and min(p[0] for p in carried) > inside + 0.025  # the can's radius and more
+    home = HandFrames(world).home
+    for name in ("right.reach_in", "right.back", "left.reach_in", "left.back"):
+        (target,) = next(s for s in steps if s.name == name).targets
+        side = name.split(".")[0]
+        assert target.position[1] == pytest.approx(home[side].position[1], abs=1e-12)
+        assert target.position[0] > inside
     # the same scene without the rule: the wall (and the roof above) set a lane outside the box
     can, _ = world.object_pose("can")
-    band = (float(can[1]), 0.25)
+    band = (float(can[1]), 0.28)
     outside = carry_lane_front(scenario.scene, band, 0.1, 0.0, float(can[0]))
     assert outside < inside
     behind = carry_lane_front(scenario.scene, band, 0.1, 0.0, float(can[0]), float(can[0]) - 0.025, 1.13)

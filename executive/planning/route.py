@@ -53,6 +53,26 @@ def footprint(model: mujoco.MjModel, data: mujoco.MjData, site: int, geoms: Sequ
     return Footprint(corners.min(axis=0), corners.max(axis=0))
 
 
+def _hits(
+    points: FloatArray, extent: Footprint, lo: FloatArray, hi: FloatArray, clearance: float
+) -> NDArray[np.bool_]:
+    """Which of ``points`` put the footprint within ``clearance`` of the box (lo, hi), not wholly under it."""
+    over_x = (points[:, 0] + extent.hi[0] > lo[0] - clearance) & (
+        points[:, 0] + extent.lo[0] < hi[0] + clearance
+    )
+    over_y = (points[:, 1] + extent.hi[1] > lo[1] - clearance) & (
+        points[:, 1] + extent.lo[1] < hi[1] + clearance
+    )
+    below = points[:, 2] + extent.lo[2] < hi[2] + clearance
+    under = points[:, 2] + extent.hi[2] > lo[2] - clearance  # not wholly above the hand
+    return np.asarray(over_x & over_y & below & under)
+
+
+def _segment(a: FloatArray, b: FloatArray, samples: int) -> FloatArray:
+    u = np.linspace(0.0, 1.0, samples)
+    return np.asarray(a[None, :] + u[:, None] * (b - a)[None, :], dtype=float)
+
+
 def via_points(
     start: FloatArray,
     target: FloatArray,
@@ -67,22 +87,15 @@ def via_points(
     under, not over. Empty when the straight line is clear. Otherwise two points at the height
     where the footprint's bottom is ``clearance`` above the highest blocking
     top: above the last clear sample before the obstacle and the first clear
-    sample after it (or above start/target when those are already over it).
+    sample after it (or above start/target when those are already over it). Empty too when
+    that way over is itself blocked (the rim of an opening the hand passes through, with the
+    wall above it): the hand then goes straight, sliding along what it meets.
     """
-    u = np.linspace(0.0, 1.0, samples)
-    points = start[None, :] + u[:, None] * (target - start)[None, :]
+    points = _segment(start, target, samples)
     blocked = np.zeros(samples, dtype=bool)
     top = -np.inf
     for lo, hi in obstacles:
-        over_x = (points[:, 0] + extent.hi[0] > lo[0] - clearance) & (
-            points[:, 0] + extent.lo[0] < hi[0] + clearance
-        )
-        over_y = (points[:, 1] + extent.hi[1] > lo[1] - clearance) & (
-            points[:, 1] + extent.lo[1] < hi[1] + clearance
-        )
-        below = points[:, 2] + extent.lo[2] < hi[2] + clearance
-        under = points[:, 2] + extent.hi[2] > lo[2] - clearance  # not wholly above the hand
-        hit = over_x & over_y & below & under
+        hit = _hits(points, extent, lo, hi, clearance)
         if np.any(hit):
             blocked |= hit
             top = max(top, float(hi[2]))
@@ -94,4 +107,8 @@ def via_points(
     after = points[min(last + 1, samples - 1)].copy()
     before[2] = max(before[2], height)
     after[2] = max(after[2], height)
+    over = _segment(before, after, samples)
+    # 1 um less: the lift height puts the footprint exactly at the clearance over the top.
+    if any(np.any(_hits(over, extent, lo, hi, clearance - 1e-6)) for lo, hi in obstacles):
+        return []
     return [before, after]

@@ -15,7 +15,7 @@ from executive.planning.plan import CompositionConfig, Step
 from executive.schema.types import Body, SceneConfig
 from executive.tasks.hands import UP, HandFrames
 
-__all__ = ["carry_lane_front", "grasp_height", "lane_carry", "one_hand_leg", "pick", "place"]
+__all__ = ["carry_lane_front", "grasp_height", "lane_carry", "one_hand_leg", "pick", "place", "reached_through"]
 
 FloatArray = NDArray[np.float64]
 
@@ -87,6 +87,26 @@ def place(
     ]
 
 
+def _band(
+    scene: SceneConfig, y_span: tuple[float, float], reach: float, base_x: float, ceiling: float
+) -> list[tuple[float, float]]:
+    """(near x, far x) of the obstacles ahead of the base that overlap the band ``y_span`` +- ``reach``.
+
+    Obstacles wholly above ``ceiling`` (a roof the hand passes under) are left out.
+    """
+    low, high = min(y_span) - reach, max(y_span) + reach
+    out = []
+    for o in scene.obstacles:
+        half_x = o.size[0] / 2 if o.shape == "box" else o.size[0]
+        half_y = o.size[1] / 2 if o.shape == "box" else o.size[0]
+        x, y = o.position[0], o.position[1]
+        half_z = o.size[2] / 2 if o.shape == "box" else o.size[1] / 2 if o.shape == "cylinder" else o.size[0]
+        if y + half_y < low or y - half_y > high or x + half_x <= base_x or o.position[2] - half_z >= ceiling:
+            continue
+        out.append((x - half_x, x + half_x))
+    return out
+
+
 def carry_lane_front(
     scene: SceneConfig,
     y_span: tuple[float, float],
@@ -106,19 +126,20 @@ def carry_lane_front(
     nor one wholly above ``ceiling`` (a roof the hand passes under). ``default`` when none is
     in the way.
     """
-    low, high = min(y_span) - reach, max(y_span) + reach
-    fronts = []
-    for o in scene.obstacles:
-        half_x = o.size[0] / 2 if o.shape == "box" else o.size[0]
-        half_y = o.size[1] / 2 if o.shape == "box" else o.size[0]
-        x, y = o.position[0], o.position[1]
-        half_z = o.size[2] / 2 if o.shape == "box" else o.size[1] / 2 if o.shape == "cylinder" else o.size[0]
-        if y + half_y < low or y - half_y > high or x + half_x <= max(base_x, beyond):
-            continue
-        if o.position[2] - half_z >= ceiling:
-            continue
-        fronts.append(x - half_x)
+    fronts = [near for near, far in _band(scene, y_span, reach, base_x, ceiling) if far > beyond]
     return min(fronts, default=default)
+
+
+def reached_through(
+    scene: SceneConfig, y_span: tuple[float, float], reach: float, base_x: float, beyond: float, ceiling: float
+) -> bool:
+    """Whether the arm reaches past an obstacle (a front wall with ports) to work across ``y_span``.
+
+    True when an obstacle ahead of the base, overlapping the band ``y_span`` +- ``reach`` and not
+    wholly above ``ceiling``, lies wholly nearer the robot than ``beyond``: the obstacles
+    :func:`carry_lane_front` leaves out because the arm passes them.
+    """
+    return any(far <= beyond for _, far in _band(scene, y_span, reach, base_x, ceiling))
 
 
 def lane_carry(
@@ -171,7 +192,10 @@ def one_hand_leg(
     :func:`carry_lane_front`), forward over the place, down, open, up, home. A robot whose
     profile asks for it (``return_along_lane``) first goes back along the lane to its own side
     after placing across the body, as it is, and only then turns home: the straight way home
-    from across the body swings the arm across the body's front while the hand turns.
+    from across the body swings the arm across the body's front while the hand turns. A hand
+    that works behind a wall it reaches past (:func:`reached_through`: a glove port) goes in
+    and out along its own line, straight ahead of its home pose, and moves sideways only
+    behind the wall.
     """
     (pos, yaw), (centre, end_yaw) = start, end
     grasp = np.array([pos[0], pos[1], grasp_height(body, float(pos[2]), cfg)])
@@ -184,12 +208,19 @@ def one_hand_leg(
     front_x = carry_lane_front(scene, (pos[1], centre[1]), reach, h.base[0], pos[0], near, above)
     lane_x = min(front_x - cfg.obstacle_clearance - length / 2, grasp[0], place_at[0])
     lane = (np.array([lane_x, grasp[1], carry_z]), np.array([lane_x, place_at[1], carry_z]))
+    own_line = np.array([lane_x, h.home[side].position[1], carry_z])
+    span = (float(own_line[1]), float(pos[1]), float(centre[1]))
+    through = reached_through(scene, (min(span), max(span)), reach, h.base[0], near, above)
+    entry: tuple[Step, ...] = ()
     back: tuple[Step, ...] = ()
-    home_side = h.side_of_body(h.home[side].position)
-    if h.world.profile.return_along_lane and h.side_of_body(place_at) != home_side:
+    if through:
+        entry = (Step("move", f"{side}.reach_in", side, (h.target(side, own_line, yaw),)),)
+        back = (Step("move", f"{side}.back", side, (h.target(side, own_line, end_yaw, yaw),)),)
+    elif h.world.profile.return_along_lane and h.side_of_body(place_at) != h.side_of_body(h.home[side].position):
         back_point = np.array([lane_x, h.home[side].position[1], carry_z])
         back = (Step("move", f"{side}.back", side, (h.target(side, back_point, end_yaw, yaw),)),)
     return [
+        *entry,
         *pick(h, side, body.name, grasp, yaw, cfg),
         *lane_carry(h, side, body.name, lane, (yaw + end_yaw) / 2, yaw),
         *place(h, side, body.name, place_at, end_yaw, yaw, cfg, back),
