@@ -60,7 +60,7 @@ robot: {{mjcf: {mjcf}, profile: unitree_g1}}
 scene:
   table: {{position: [0.47, 0.0], size: [0.50, 1.0, 0.04], height: 0.66}}
   objects:
-    - {{name: book, shape: box, size: [0.14, 0.09, 0.04], position: [0.30, 0.22], mass: 0.3}}
+    - {{name: book, shape: box, size: [0.14, 0.09, 0.05], position: [0.30, 0.22], mass: 0.3}}
   obstacles:
     - {{name: book_stack, shape: box, size: [0.16, 0.12, 0.22], position: [0.48, 0.0]}}
 uncertainty: {{object_position: 0.01, object_yaw: 3, obstacle_position: 0.01, com: 0.01}}

@@ -58,11 +58,10 @@ def test_validate_and_plan_list_every_alternative(g1_file: Path) -> None:
 @pytest.mark.slow
 @pytest.mark.parametrize("truth", [("--exact",), ("--seed", "1")], ids=["exact", "sampled"])
 def test_run_completes(g1_scenario_yaml: str, tmp_path: Path, truth: tuple[str, ...]) -> None:
-    """The mission completes, live guards on. The book is 5 cm thick here: closed on the 4 cm
-    book of the fixture, the Dex3's fingers curl 2.5 cm below the grasp point (1.8 cm open) and
-    the guard stops the lift at 7.7 mm from the table (its limit is the planner's 10 mm)."""
-    path = tmp_path / "g1_book_5cm.yaml"
-    path.write_text(g1_scenario_yaml.replace("0.14, 0.09, 0.04", "0.14, 0.09, 0.05"))
+    """The mission completes, live guards on (the fixture's book is 5 cm thick: a 4 cm one is
+    refused before planning, the Dex3's closed fingers reaching 2.5 cm below the grasp point)."""
+    path = tmp_path / "g1_book.yaml"
+    path.write_text(g1_scenario_yaml)
     out = _ok(_cli("run", str(path), *truth, "--rollouts", "0", "--out", str(tmp_path / "run")))
     assert "outcome   success" in out, out
 
@@ -71,7 +70,7 @@ def test_run_completes(g1_scenario_yaml: str, tmp_path: Path, truth: tuple[str, 
 def test_small_campaign_runs(g1_file: Path, tmp_path: Path) -> None:
     folder = tmp_path / "campaign"
     out = _ok(
-        _cli("campaign", str(g1_file), "--trials", "4", "--alternatives", "left,right", "--out", str(folder))
+        _cli("campaign", str(g1_file), "--trials", "2", "--alternatives", "left", "--out", str(folder))
     )
     rows = [line.split() for line in out.splitlines() if line.startswith(("left ", "right "))]
-    assert [r[:2] for r in rows] == [["left", "4"], ["right", "4"]], out
+    assert [r[:2] for r in rows] == [["left", "2"]], out

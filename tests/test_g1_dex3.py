@@ -23,12 +23,12 @@ from executive.scenario import loads
 from executive.tasks.steps import plan_alternative
 from executive.world.model import World, build
 
-BOOK = "0.14, 0.09, 0.04"
+BOOK = "0.14, 0.09, 0.05"
 
 
 def _lift(text: str, width: float) -> tuple[World, World, RunResult]:
     """Plan the left alternative for a book ``width`` wide; run it in physics until the lift ends."""
-    scenario = loads(text.replace(BOOK, f"0.14, {width}, 0.04"), source="g1_width.yaml")
+    scenario = loads(text.replace(BOOK, f"0.14, {width}, 0.05"), source="g1_width.yaml")
     estimate, truth = build(scenario), build(scenario)
     plan = plan_alternative(Planner(estimate), estimate, scenario.mission[0], "left")
     end = 0.0

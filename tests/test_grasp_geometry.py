@@ -12,8 +12,10 @@ from pathlib import Path
 import pytest
 
 import executive.tasks.steps as composition
+from executive.planning.plan import CompositionConfig
 from executive.planning.planner import Planner, PlanningError
 from executive.risk.grasp import grasp_tolerance
+from executive.risk.hand_span import hand_span
 from executive.scenario import load, loads
 from executive.tasks.grasp_geometry import GraspGeometryError, hand_geometry, min_thickness
 from executive.tasks.steps import plan_alternative
@@ -94,15 +96,34 @@ def test_g1_dex3_opening_is_measured_on_its_open_hand(g1_scenario_yaml: str) -> 
     g1 = build(loads(g1_scenario_yaml, source="g1_book_transfer.yaml"))
     for side in ("left", "right"):
         geometry = hand_geometry(g1, side)
-        print(side, geometry)
         tolerance = grasp_tolerance(g1, side, "book")
         assert tolerance.closing == pytest.approx((geometry.jaw_opening - 0.09) / 2.0, abs=1e-9)
         # The profile's site sits between the open thumb and fingers, the 9 cm book fits with
-        # room for the approach, and the fingertips keep clear of the table under a 4 cm book.
+        # room for the approach, and the fingertips keep clear of the table under a 5 cm book.
         assert 0.09 < geometry.jaw_opening < 0.20
-        assert 0.0 < geometry.finger_depth < 0.03 - 0.01
+        assert 0.0 < geometry.finger_depth < 0.04 - 0.01
     wide = build(
-        loads(g1_scenario_yaml.replace("0.14, 0.09, 0.04", "0.14, 0.16, 0.04"), source="g1_wide.yaml")
+        loads(g1_scenario_yaml.replace("0.14, 0.09, 0.05", "0.14, 0.16, 0.05"), source="g1_wide.yaml")
     )
     with pytest.raises(GraspGeometryError, match="the 16 cm 'book' is wider than the 15 cm jaw opening"):
         plan_alternative(Planner(wide), wide, wide.scenario.mission[0], "left")
+
+
+def test_g1_dex3_fingers_reach_deeper_closed(g1_scenario_yaml: str) -> None:
+    """The Dex3's fingers curl below the grasp point as they close (2.5 cm, against 1.8 cm open):
+    the finger depth is the closed one, and a 4 cm book is refused before planning with the
+    thickness the closed hand needs: depth + 1 cm table clearance + 1 cm grip depth (closed form,
+    :func:`min_thickness`), where in physics the guard stopped the lift 7.7 mm off the table."""
+    g1 = build(loads(g1_scenario_yaml, source="g1_book_transfer.yaml"))
+    geometry = hand_geometry(g1, "left")
+    open_depth = hand_span(g1, "left").finger_depth
+    closed_depth = hand_span(g1, "left", closed=True).finger_depth
+    assert closed_depth > open_depth + 0.005
+    assert geometry.finger_depth == closed_depth
+    need = min_thickness(closed_depth, 0.01, CompositionConfig().grip_depth)
+    assert need == pytest.approx(closed_depth + 0.02, abs=1e-12) and 0.04 < need < 0.05
+    thin = build(
+        loads(g1_scenario_yaml.replace("0.14, 0.09, 0.05", "0.14, 0.09, 0.04"), source="g1_thin.yaml")
+    )
+    with pytest.raises(GraspGeometryError, match=r"the 4 cm 'book' is thinner than the 4\.5 cm"):
+        plan_alternative(Planner(thin), thin, thin.scenario.mission[0], "left")

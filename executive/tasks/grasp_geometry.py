@@ -57,11 +57,12 @@ class HandGeometry:
 
 
 def hand_geometry(world: World, side: str) -> HandGeometry:
-    """Measure the ``side`` hand, open (the home keyframe), on the world's model.
+    """Measure the ``side`` hand on the world's model.
 
-    The jaw opening is the free span through the site along its closing axis and the finger
-    depth the hand's reach past the site along its approach axis
-    (:func:`executive.risk.hand_span.hand_span`).
+    The jaw opening is the free span through the site along its closing axis, open (the home
+    keyframe); the finger depth the hand's reach past the site along its approach axis, open
+    or closed, whichever is deeper: fingers that curl as they close (the Dex3's) reach lower
+    closed than open (:func:`executive.risk.hand_span.hand_span`).
 
     Args:
         world: the world whose robot has the hand.
@@ -70,8 +71,8 @@ def hand_geometry(world: World, side: str) -> HandGeometry:
     Returns:
         The hand's :class:`HandGeometry`.
     """
-    span = hand_span(world, side)
-    return HandGeometry(jaw_opening=span.opening, finger_depth=span.finger_depth)
+    span, closed = hand_span(world, side), hand_span(world, side, closed=True)
+    return HandGeometry(jaw_opening=span.opening, finger_depth=max(span.finger_depth, closed.finger_depth))
 
 
 def _width_and_opening(world: World, side: str, obj: str) -> tuple[float, float]:
@@ -84,6 +85,11 @@ def _width_and_opening(world: World, side: str, obj: str) -> tuple[float, float]
     width = -2.0 * grasp_tolerance(world, side, obj, jaw_opening=0.0).closing
     opening = 2.0 * grasp_tolerance(world, side, obj).closing + width
     return width, opening
+
+
+def _cm(length: float) -> str:
+    """A length in cm to a millimetre, without a trailing ".0" (4, 4.5)."""
+    return f"{length * 100:.1f}".rstrip("0").rstrip(".")
 
 
 def min_thickness(finger_depth: float, table_clearance: float, grip_depth: float) -> float:
@@ -142,7 +148,7 @@ def check_grasp(
     raise GraspGeometryError(
         motion,
         side,
-        f"the {thickness * 100:.0f} cm '{obj}' is thinner than the {need * 100:.0f} cm the fingers need "
+        f"the {_cm(thickness)} cm '{obj}' is thinner than the {_cm(need)} cm the fingers need "
         f"above the table (the {side} hand reaches {depth * 100:.1f} cm past its grasp point, which is "
         f"{site_above_table * 100:.1f} cm above the table, and keeps {table_clearance * 100:.0f} cm off it)",
     )
