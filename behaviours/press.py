@@ -232,6 +232,11 @@ class Press(RobotBehaviour):
                 f"press: no contact between the {self.side} hand and {self.target} "
                 f"{self.settle_s:g} s after the push (force 0 N, commanded {band})"
             )
+        if abs(f - self.force) <= self.tolerance:  # in the band now, but it kept swinging out
+            return (
+                f"press: the force on {self.target} did not settle: never {self.steady_s:g} s within "
+                f"+- {0.5 * self.tolerance:.2g} N of {self.force:g} N in {self.settle_s:g} s (last {f:.1f} N)"
+            )
         low = "low" if f < self.force else "high"
         saturated = self._saturated()
         why = f"; {saturated} at its torque limit" if saturated and low == "low" else ""
