@@ -41,6 +41,7 @@ from executive.decision.audit import AuditLog, now_iso, write_summary
 from executive.decision.physics_check import PhysicsCheck
 from executive.decision.selector import RiskSelector, task_label
 from executive.execution.simulated import SimulatedRobot
+from executive.execution.tick_record import TickRecorder
 from executive.monitoring.detectors import FailureDetector
 from executive.monitoring.live_risk import LiveRiskMonitor
 from executive.schema.types import Scenario
@@ -151,6 +152,8 @@ class Executive:
         self.log = AuditLog(self.folder, resume=resume)
         try:
             self._build(approval, robot, truth, control_dt, guard, background, pace_waiting)
+            if self.folder is not None:  # the run folder's per-tick record (its module's docstring)
+                self.tick_listeners.append(TickRecorder(self.folder, self, truth=truth))
         except BaseException:
             self.log.abandon()  # nothing was decided: the folder is free again
             raise
