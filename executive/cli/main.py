@@ -14,6 +14,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from executive.cli import replay as replay_command
+from executive.cli import tree as tree_command
 from executive.cli.output_paths import check_file, check_folder
 from executive.errors import ExecutiveError
 from executive.schema import catalog as registry
@@ -384,6 +386,8 @@ def _parser() -> argparse.ArgumentParser:
     _add_run(sub)
     _add_campaign(sub)
     _add_fidelity(sub)
+    tree_command.add_parser(sub, _SCENARIO_HELP)
+    replay_command.add_parser(sub, _PIXELS)
     return parser
 
 

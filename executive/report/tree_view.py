@@ -1,0 +1,190 @@
+"""The mission's behaviour tree as a run builds it, with every alternative's subtree, for display.
+
+``executive run`` ticks a Sequence (named after the scenario) of one
+:class:`executive.decision.selector.RiskSelector` per task; a selector gets its
+alternatives' subtrees as children only once its planning thread has planned them. A
+subtree's shape comes from the task kind's steps alone (:meth:`TaskKind.steps`, hand targets
+on the estimate, no IK): the planned trajectories are only handed to the motion behaviours.
+:func:`mission_tree` therefore lays out each alternative's steps and builds its subtree with
+the kind's own :meth:`TaskKind.subtree` on a stand-in trajectory per motion step (one knot
+at the robot's home pose, the step's name), without planning or physics. A kind whose
+subtree cannot be built that way is planned for real (the whole-body planner, no physics)
+and said so in :attr:`MissionTree.notes`. The alternatives are in the task's order; a run
+puts them in its risk ranking's order and leaves out those it found infeasible.
+
+Display it with py_trees' own renderers: :func:`text` (``py_trees.display.unicode_tree`` or
+``ascii_tree``), :func:`dot_source` (``py_trees.display.dot_tree``, pydot) and
+:func:`write_svg` (Graphviz's ``dot`` program).
+"""
+
+from __future__ import annotations
+
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import py_trees
+
+from executive.decision.approval import make_channel
+from executive.decision.audit import AuditLog
+from executive.decision.selector import RiskSelector
+from executive.errors import ExecutiveError
+from executive.planning.plan import AlternativePlan, CompositionConfig, Step
+from executive.planning.planner import Planner, PlanningError, Trajectory
+from executive.schema.types import Scenario
+from executive.tasks.base import TaskKind
+from executive.tasks.steps import plan_alternative
+from executive.world.model import World, build
+
+__all__ = [
+    "GraphvizMissing",
+    "MissionTree",
+    "dot_program",
+    "dot_source",
+    "mission_tree",
+    "text",
+    "write_svg",
+]
+
+
+class GraphvizMissing(ExecutiveError):
+    """Graphviz's ``dot`` program, needed to draw an SVG, is not installed."""
+
+
+@dataclass
+class MissionTree:
+    """The tree (``root``) and, per alternative left out or planned, a line saying why (``notes``)."""
+
+    root: py_trees.behaviour.Behaviour
+    notes: list[str] = field(default_factory=list)
+    planned: list[str] = field(default_factory=list)  # "task0/left": built from a real plan
+
+
+def _stand_in(step: Step, world: World) -> Trajectory:
+    """A one-knot trajectory at the home pose named after ``step``: what a subtree is built from."""
+    home = world.home_qpos()
+    hands = {t.side: np.asarray(t.position, dtype=float)[None, :] for t in step.targets}
+    return Trajectory(
+        name=step.name,
+        times=np.zeros(1),
+        qpos=home[None, :],
+        hand_paths=hands,
+        com_path=np.zeros((1, 3)),
+        carried=step.carried,
+    )
+
+
+def _subtree(
+    kind: TaskKind, selector: RiskSelector, name: str, world: World, guard: bool, planner: list[Planner]
+) -> tuple[py_trees.behaviour.Behaviour, bool]:
+    """One alternative's subtree, from its steps (False) or, if that fails, from a real plan (True)."""
+    task = selector.task
+    steps = kind.steps(task, world, name, CompositionConfig())
+    trajectories = {s.name: _stand_in(s, world) for s in steps if s.targets}
+    try:
+        return kind.subtree(AlternativePlan(name, task, tuple(steps), trajectories), guard=guard), False
+    except Exception:  # a kind whose subtree reads its trajectories: plan it for real
+        if not planner:
+            planner.append(Planner(world))
+        plan = plan_alternative(planner[0], world, task, name)
+        return kind.subtree(plan, guard=guard), True
+
+
+def mission_tree(scenario: Scenario, *, guard: bool = True, world: World | None = None) -> MissionTree:
+    """The Sequence of RiskSelectors ``executive run`` builds, every alternative's subtree as children.
+
+    Args:
+        scenario: the scenario.
+        guard: motions wrapped in live risk guards (``executive run``'s default; ``--no-guard``).
+        world: its estimate world (built if None).
+
+    Returns:
+        The :class:`MissionTree`. An alternative the robot does not support, or whose steps
+        cannot be laid out on the estimate, is not in it: a note says why.
+    """
+    world = world if world is not None else build(scenario)
+    log = AuditLog(None)
+    channel = make_channel("deny")
+    selectors = [
+        RiskSelector(
+            f"task{i}",
+            task,
+            estimate=world,
+            channel=channel,
+            log=log,
+            timeout_s=scenario.approval.timeout_s,
+            guard=guard,
+            physics=None,
+            background=False,
+        )
+        for i, task in enumerate(scenario.mission)
+    ]
+    root = py_trees.composites.Sequence(name=scenario.name, memory=True, children=list(selectors))
+    out = MissionTree(root)
+    planner: list[Planner] = []
+    for selector in selectors:
+        for alt in selector.kind.alternatives(selector.task, world):
+            where = f"{selector.name}/{alt.name}"
+            if alt.unsupported:
+                out.notes.append(f"{where}: not in the tree: {alt.unsupported}")
+                continue
+            try:
+                subtree, planned = _subtree(selector.kind, selector, alt.name, world, guard, planner)
+            except PlanningError as exc:
+                out.notes.append(f"{where}: not in the tree: {exc}")
+                continue
+            selector.add_child(subtree)
+            if planned:
+                out.planned.append(where)
+                out.notes.append(f"{where}: subtree built from a real plan (its kind reads the trajectories)")
+    return out
+
+
+def text(root: py_trees.behaviour.Behaviour, *, unicode: bool = True) -> str:
+    """The tree as py_trees draws it for a terminal (``unicode_tree``, or ``ascii_tree``)."""
+    if unicode:
+        return str(py_trees.display.unicode_tree(root))
+    return str(py_trees.display.ascii_tree(root))
+
+
+def dot_source(root: py_trees.behaviour.Behaviour) -> str:
+    """Graphviz source of the tree (``py_trees.display.dot_tree``, through pydot)."""
+    return str(py_trees.display.dot_tree(root).to_string())
+
+
+def dot_program() -> str:
+    """The path of Graphviz's ``dot`` program.
+
+    Raises:
+        GraphvizMissing: it is not on the PATH (the message says how to install it).
+    """
+    dot = shutil.which("dot")
+    if dot is None:
+        raise GraphvizMissing(
+            "--svg needs Graphviz's `dot` program, which is not on the PATH "
+            "(Debian/Ubuntu: apt-get install graphviz; macOS: brew install graphviz); "
+            "--dot FILE writes the Graphviz source without it"
+        )
+    return dot
+
+
+def write_svg(root: py_trees.behaviour.Behaviour, path: Path) -> Path:
+    """Draw the tree as SVG with Graphviz's ``dot`` program.
+
+    Raises:
+        GraphvizMissing: ``dot`` is not on the PATH (with how to install it).
+        ExecutiveError: ``dot`` failed or the file could not be written.
+    """
+    dot = dot_program()
+    graph = py_trees.display.dot_tree(root)
+    try:
+        svg = graph.create(prog=dot, format="svg")
+    except Exception as exc:  # pydot reports dot's failure as an assertion or OSError
+        raise ExecutiveError(f"--svg {path}: Graphviz's dot failed: {exc}") from None
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(svg if isinstance(svg, bytes) else str(svg).encode())
+    except OSError as exc:
+        raise ExecutiveError(f"--svg {path}: not written ({exc.strerror or exc})") from None
+    return path
