@@ -154,3 +154,35 @@ def test_the_sample_stays_inside_the_box(world: World) -> None:
     assert outside < inside
     behind = carry_lane_front(scenario.scene, band, 0.1, 0.0, float(can[0]), float(can[0]) - 0.025, 1.13)
     assert behind > inside
+
+
+def test_campaign_counts_breach_touches_apart() -> None:
+    """The campaign's prediction carries P(breach) (a part of the collision mode), and its
+    summary counts the trials whose failure touched a breach obstacle, with the interval."""
+    from executive.validation.campaign import predict, summarise, table_text
+
+    scenario = load("glovebox")
+    prediction = predict(scenario, 2, "right")
+    assert prediction.risk is not None
+    assert 0.0 <= prediction.risk["breach"] <= prediction.risk["collision"]
+    predicted = {**prediction.risk, "value": prediction.value}
+
+    def record(i: int, bodies: tuple[str, ...]) -> dict[str, object]:
+        failure = {"mode": "collision", "bodies": list(bodies), "detail": "-"} if bodies else None
+        outcome = "collision" if bodies else "success"
+        return {
+            "trial": i,
+            "alternative": "right",
+            "outcome": outcome,
+            "failure": failure,
+            "predicted": predicted,
+        }
+
+    records = [record(0, ("right_hand", "window")), record(1, ("right_hand", "right_wall")), record(2, ())]
+    summary = summarise(scenario, records, ["right", "left"], {"right": prediction})
+    touches = summary["alternatives"][0]["breach"]
+    assert (touches["touches"], touches["trials"]) == (1, 3)
+    assert touches["rate"]["ci95"][0] > 0.0 and touches["predicted"] == pytest.approx(
+        prediction.risk["breach"]
+    )
+    assert "right: 1 of 3" in table_text(summary)

@@ -86,7 +86,7 @@ def predict(scenario: Scenario, task_index: int, alternative: str) -> Prediction
     """Plan ``alternative`` on the estimate and assess its risk (as ``executive plan`` does)."""
     from executive.decision.assessment import assess_plan
     from executive.planning.planner import Planner, PlanningError
-    from executive.risk.collision import CollisionModel
+    from executive.risk.collision import CollisionModel, breach_summary
     from executive.tasks.steps import plan_alternative
     from executive.world.model import build
 
@@ -98,7 +98,11 @@ def predict(scenario: Scenario, task_index: int, alternative: str) -> Prediction
         return Prediction(alternative, False, None, None, str(exc))
     model = CollisionModel(world, scenario.risk, uncertainty=scenario.uncertainty)
     risk = assess_plan(world, plan, model)
-    return Prediction(alternative, True, risk.as_dict(), risk.value(scenario.risk.ordering), "", plan, risk)
+    risk_dict = risk.as_dict()
+    breach = breach_summary(risk.components["collision"]) if "collision" in risk.components else None
+    if breach is not None:  # P(touching a breach obstacle), a part of the collision mode
+        risk_dict["breach"] = float(breach["probability"])
+    return Prediction(alternative, True, risk_dict, risk.value(scenario.risk.ordering), "", plan, risk)
 
 
 def check_predictions(
@@ -524,6 +528,9 @@ def summarise(
         _alternative_summary(name, executed, records, predictions.get(name), ordering)
         for name in alternatives
     ]
+    breach = sorted(o.name for o in scenario.scene.obstacles if o.category == "breach")
+    for a in per_alt if breach else ():
+        a["breach"] = _breach_touches([r for r in executed if r["alternative"] == a["name"]], set(breach))
     observed_by, auc, ceiling, brier_by, ece_by = _forecast_scores(executed)
     ran = [a for a in per_alt if a["trials"]]
     rho = {
@@ -544,7 +551,37 @@ def summarise(
         "spearman": rho[ordering],
         "spearman_by": rho,
         "predictor": dict(_FORECASTS),
+        "breach_obstacles": breach,
     }
+
+
+def _breach_touches(mine: Sequence[dict[str, Any]], breach: set[str]) -> dict[str, Any]:
+    """An alternative's executed trials whose failure touched a breach obstacle (the failure's
+    bodies), with the 95% interval, and the mean predicted P(breach)."""
+    touches = sum(bool(breach & set((r.get("failure") or {}).get("bodies") or ())) for r in mine)
+    predicted = [float((r.get("predicted") or {}).get("breach", 0.0)) for r in mine]
+    return {
+        "touches": touches,
+        "trials": len(mine),
+        "rate": _rate(touches, len(mine)),
+        "predicted": float(np.mean(predicted)) if predicted else None,
+    }
+
+
+def _breach_lines(summary: dict[str, Any]) -> list[str]:
+    """One line per executed alternative: breach touches of N, interval, predicted P(breach)."""
+    names = summary.get("breach_obstacles") or []
+    if not names:
+        return []
+    lines = [f"breach touches (category breach: {', '.join(names)}):"]
+    for a in summary["alternatives"]:
+        b = a.get("breach")
+        if b and b["trials"]:
+            lines.append(
+                f"  {a['name']}: {b['touches']} of {b['trials']}, 95% CI {_ci(b['rate'])}%, "
+                f"predicted P(breach) {b['predicted']:.4f}"
+            )
+    return lines
 
 
 def _alternative_summary(
@@ -694,7 +731,7 @@ def table_text(summary: dict[str, Any]) -> str:
         f"Spearman (predicted {summary['ordering']} vs observed failure rate, per alternative): "
         f"{_num(summary['spearman'], '.2f')}"
     )
-    return "\n".join(lines)
+    return "\n".join(lines + _breach_lines(summary))
 
 
 def table_markdown(summary: dict[str, Any]) -> str:
@@ -724,6 +761,9 @@ def table_markdown(summary: dict[str, Any]) -> str:
         f"Spearman rank correlation, predicted {summary['ordering']} vs observed failure rate "
         f"across alternatives: {_num(summary['spearman'], '.2f')}"
     )
+    breach = _breach_lines(summary)
+    if breach:
+        rows += ["", breach[0], ""] + [f"- {line.strip()}" for line in breach[1:]]
     return "\n".join(rows)
 
 
