@@ -211,37 +211,44 @@ def test_a_killed_run_leaves_only_complete_json_lines(tmp_path: Path) -> None:
 
 
 @pytest.mark.slow
-def test_the_tick_that_ends_planning_only_swaps_in_subtrees_built_by_the_worker(
+def test_the_worker_process_plans_and_the_ticks_only_swap_its_results_in(
     monkeypatch: pytest.MonkeyPatch,
 ) -> None:
-    """Subtrees are built and set up in the planning thread, and the chosen alternative's guards
-    have their planned knots computed there: the ticks compute none while it executes."""
-    import threading
+    """The planning worker process plans, assesses and checks in physics (this process plans
+    nothing); the ticks that follow build one subtree each from its plans and swap them in; the
+    chosen alternative's guards have their planned knots from the worker: the ticks compute none
+    while it executes."""
+    import executive.decision.planning_job as planning_job
+    import executive.tasks.steps as steps
 
-    import executive.tasks.steps as selector_module
+    planned_here: list[int] = []
+    built_at: list[int] = []
+    real_assess, real_build = planning_job.assess_task, steps.build_subtree
 
-    built_in: list[str] = []
-    real = selector_module.build_subtree
+    def assess_spy(*args: Any, **kwargs: Any) -> Any:
+        planned_here.append(1)
+        return real_assess(*args, **kwargs)
 
-    def spy(plan: Any, **kwargs: Any) -> Any:
-        built_in.append(threading.current_thread().name)
-        return real(plan, **kwargs)
+    def build_spy(plan: Any, **kwargs: Any) -> Any:
+        built_at.append(executive.ticks)
+        return real_build(plan, **kwargs)
 
-    monkeypatch.setattr(selector_module, "build_subtree", spy)
+    monkeypatch.setattr(planning_job, "assess_task", assess_spy)
+    monkeypatch.setattr(steps, "build_subtree", build_spy)
     executive = Executive("book_transfer", approval="auto", truth="exact")
     monitor = executive.monitor
-    assert monitor is not None
+    assert monitor is not None and executive.planning is not None
     selector = executive.selectors[0]
     while not executive.done and selector.phase != "executing":
         executive.tick()
-    assert len(built_in) == len(selector.ranking) and threading.current_thread().name not in built_in
+    assert not planned_here
+    assert len(built_at) == len(selector.ranking) == len(set(built_at))  # one subtree per tick
     assert [child.name for child in selector.children] == [a.name for a in selector.ranking]
-    prepared = monitor.knots_computed
-    assert prepared > 0
+    assert monitor.knots_adopted > 0 and monitor.knots_computed == 0
     for _ in range(250):  # 5 s of the chosen alternative, its guards checking every tick
         executive.tick()
     assert selector.phase == "executing" and selector.chosen == selector.ranking[0].name
-    assert monitor.knots_computed == prepared
+    assert monitor.knots_computed == 0
     executive.stop("test over")
 
 

@@ -21,6 +21,7 @@ import dataclasses
 import multiprocessing
 import os
 import signal
+import threading
 import time
 from collections import Counter
 from collections.abc import Callable, Mapping, Sequence
@@ -50,6 +51,7 @@ __all__ = [
     "apply_verdict",
     "check_alternatives",
     "estimate_scenario",
+    "exit_with_parent",
     "physics_text",
     "rollout_seed",
     "run_job",
@@ -340,11 +342,30 @@ def _choice(
     return choice.confidence, choice.opportunity_cost
 
 
+def exit_with_parent(period_s: float = 0.2) -> threading.Thread:
+    """Start a thread that ends this process (``os._exit``) once its parent process is gone.
+
+    A pool's worker waits on its task queue forever; when the process that owns the pool dies
+    without closing it (a planning worker killed mid-plan), nobody else would end it.
+    """
+    parent = os.getppid()
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(period_s)
+        os._exit(1)
+
+    thread = threading.Thread(target=watch, name="exit-with-parent", daemon=True)
+    thread.start()
+    return thread
+
+
 def _init_worker() -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
     # Ctrl-C on a terminal reaches the whole foreground process group: the process that owns
     # the pool handles it and shuts the workers down; a worker must not die printing a traceback.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    exit_with_parent()
 
 
 def _warm_up() -> None:

@@ -1,8 +1,9 @@
 """RiskSelector: a py_trees composite that runs the lowest-risk alternative of a task.
 
 On entry the selector plans and assesses every alternative of its task on the
-current estimate (:func:`executive.decision.assessment.assess_task`) in a worker thread,
-so ticks keep returning RUNNING (the robot holds) while it plans. It then:
+current estimate (:func:`executive.decision.assessment.assess_task`) in a planning worker
+process (:mod:`executive.decision.planning_worker`), so ticks keep returning RUNNING (the
+robot holds) while it plans, and keep their period. It then:
 
 1. ranks the feasible alternatives by the scenario's ordering quantity
    (``risk.ordering``: ``weighted_sum``, ``probability`` or ``expected_loss``) and
@@ -23,11 +24,15 @@ looked), each time with an ``observation`` line in the log.
    A fall or unstable simulation ends the task at once: nothing is re-tried on a
    robot that may not be standing.
 
-The worker thread does all the heavy work of a decision: it plans and assesses,
-builds every feasible alternative's subtree (and runs its ``setup``), and lets the
-live risk monitor (``/executive/live_risk``, if any) compute the guarded motions'
-planned distances of the lowest-risk alternative. The tick that sees the planning
-done only logs, ranks and swaps the ready subtrees in.
+The worker process does all the heavy work of a decision
+(:class:`executive.decision.planning_job.Planning`): it plans and assesses, dry-runs and
+rolls out in physics, and computes the planned distances of the lowest-risk alternative's
+guarded motions. What comes back is plain data (plans as arrays); the ticks that follow
+log it, build one subtree per tick from the plans (under a millisecond each), hand the
+prepared distances to the live risk monitor (``/executive/live_risk``, if any) and swap the
+subtrees in. A worker that dies or hangs is logged (``planning_worker``) and replaced, and the
+task re-plans from where the robot holds. ``background=False`` does the same work inside
+the tick instead (blocking: for batch use and tests).
 
 Every step is a line in the audit log (:class:`executive.decision.audit.AuditLog`) before
 it is acted on; no alternative above the threshold starts without an approval
@@ -36,7 +41,6 @@ line naming it (checked in :meth:`RiskSelector._start`).
 
 from __future__ import annotations
 
-import concurrent.futures
 import math
 import time
 from collections.abc import Callable, Iterator, Sequence
@@ -46,16 +50,17 @@ import mujoco
 import numpy as np
 import py_trees
 
-from behaviours.guard import LIVE_RISK_KEY, RiskGuard
+from behaviours.guard import LIVE_RISK_KEY
 from behaviours.robot_access import NAMESPACE
 from executive.decision.approval import AlternativeRisk as RequestRow
 from executive.decision.approval import ApprovalChannel, ApprovalDecision, ApprovalRequest, PendingApproval
-from executive.decision.assessment import AlternativeRisk, assess_task
+from executive.decision.assessment import AlternativeRisk
 from executive.decision.audit import AuditLog
 from executive.decision.physics_check import PhysicsCheck, PhysicsVerdict, physics_text
+from executive.decision.planning_job import EstimateState, Planning, PlanningJob, PlanningResult, ranked
+from executive.decision.planning_worker import PlanningWorker, WorkerLost
 from executive.errors import ExecutiveError
-from executive.planning.planner import Planner
-from executive.risk.collision import CollisionModel, breach_summary
+from executive.risk.collision import breach_summary
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
 from executive.world.model import World
@@ -65,13 +70,11 @@ __all__ = ["RiskSelector", "task_label"]
 
 Status = py_trees.common.Status
 FloatArray = np.ndarray
-#: What the planning thread hands the tick: every alternative's assessment (after the physics
-#: check), the check's verdict (None without one), and the ready (set up) subtrees of the
-#: feasible ones by name.
-Planned = tuple[list[AlternativeRisk], PhysicsVerdict | None, dict[str, py_trees.behaviour.Behaviour]]
 
 #: Failure modes after which nothing is re-tried.
 TERMINAL_MODES = ("fall", "unstable")
+#: Planning workers lost in one decision before the task fails (each is replaced and re-planned).
+MAX_WORKER_LOSSES = 3
 
 
 def task_label(task: Task) -> str:
@@ -113,9 +116,12 @@ class RiskSelector(py_trees.composites.Composite):
         timeout_s: approval timeout (None: wait forever).
         guard: wrap motions in live risk guards.
         physics: the physics check (dry runs, rollouts) every decision goes through; None
-            only where the caller checks plans in physics itself.
-        background: plan in a worker thread (ticks never block); False plans inside the
-            tick (blocking, for batch use).
+            only where the caller checks plans in physics itself. With a worker, the worker's
+            own check runs (the same rule, its own rollout processes).
+        background: plan in a planning worker process (ticks never block); False plans
+            inside the tick (blocking, for batch use).
+        worker: the planning worker to use (shared by a mission's selectors); None with
+            ``background``: the selector starts one of its own on its first decision.
     """
 
     def __init__(
@@ -130,6 +136,7 @@ class RiskSelector(py_trees.composites.Composite):
         guard: bool = True,
         physics: PhysicsCheck | None = None,
         background: bool = True,
+        worker: PlanningWorker | None = None,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
         super().__init__(name=name)
@@ -155,10 +162,15 @@ class RiskSelector(py_trees.composites.Composite):
         self.ranking: list[AlternativeRisk] = []  # feasible, lowest value first
         self.results: list[AlternativeRisk] = []  # every alternative of the last planning
         self.tried: list[str] = []
-        self._planner: Planner | None = None
-        self._collision: CollisionModel | None = None
-        self._pool: concurrent.futures.ThreadPoolExecutor | None = None
-        self._future: concurrent.futures.Future[Planned] | None = None
+        self.worker = worker
+        self._own_worker = False  # whether this selector started (and closes) its worker
+        self._local: Planning | None = None  # the in-tick work (background False)
+        self._job: PlanningJob | None = None  # the decision being worked out
+        self._ticket: int | None = None  # its ticket with the worker
+        self._lost: WorkerLost | None = None  # the worker was found gone when the job was sent
+        self._losses = 0  # workers lost in this decision
+        self._result: PlanningResult | None = None  # its result, once received
+        self._built: dict[str, py_trees.behaviour.Behaviour] = {}  # subtrees built from it so far
         self._approved: set[str] = set()
         self._by_name: dict[str, py_trees.behaviour.Behaviour] = {}
         self._last_look: float | None = None  # robot time of the last observation
@@ -184,12 +196,11 @@ class RiskSelector(py_trees.composites.Composite):
     # --- py_trees life cycle --------------------------------------------------------------
 
     def setup(self, **kwargs: Any) -> None:
-        """Heavy work once: the planner and the collision model of the estimate."""
-        if self._planner is None:
-            self._planner = Planner(self.estimate)
-            self._collision = CollisionModel(
-                self.estimate, self.estimate.scenario.risk, uncertainty=self.estimate.scenario.uncertainty
-            )
+        """Heavy work once: planning inside the tick (``background`` False) builds its planner and
+        collision model of the estimate now; a worker builds its own."""
+        if not self.background and self._local is None:
+            self._local = Planning(self.estimate, self.physics)
+            self._local.tools(self.name)
 
     def tick(self) -> Iterator[py_trees.behaviour.Behaviour]:
         if self.status != Status.RUNNING:
@@ -215,14 +226,15 @@ class RiskSelector(py_trees.composites.Composite):
             # halted from above (the run is stopped): answer nothing more, plan nothing more
             if self.pending is not None and self.pending.decision is None:
                 self.pending.cancel(by="halt")
-            if self._future is not None:
-                self._future.cancel()
+            if self._ticket is not None and self.worker is not None:
+                self.worker.forget(self._ticket)
+                self._ticket = None
         super().stop(new_status)
 
     def shutdown(self) -> None:
-        if self._pool is not None:
-            self._pool.shutdown(wait=False, cancel_futures=True)
-            self._pool = None
+        if self._own_worker and self.worker is not None:
+            self.worker.close()
+            self.worker, self._own_worker = None, False
 
     # --- states ---------------------------------------------------------------------------
 
@@ -230,6 +242,8 @@ class RiskSelector(py_trees.composites.Composite):
         self.phase, self.outcome, self.failure = "idle", None, None
         self.chosen, self.chosen_risk, self.approval, self.pending = None, None, None, None
         self.ranking, self.results, self.tried, self._approved = [], [], [], set()
+        self._job, self._ticket, self._lost, self._result, self._built = None, None, None, None, {}
+        self._losses = 0
 
     def _start_planning(self, observe: str | None = None) -> None:
         """Plan from the measured joints; ``observe``: first update the estimate, for this reason."""
@@ -249,30 +263,37 @@ class RiskSelector(py_trees.composites.Composite):
             object=self._object_state(),
         )
         self.phase = "planning"
+        self._job = PlanningJob(
+            self.name,
+            task,
+            q,
+            EstimateState.of(self.estimate),
+            physics=self.physics is not None,
+            guard=self._monitor() is not None,
+        )
+        self._submit()
 
-        monitor = self.bb.get(LIVE_RISK_KEY) if self.guard and self.bb.exists(LIVE_RISK_KEY) else None
-        if self.physics is not None:
-            self.physics.pool.warm()  # the workers start (or are reused) while the planner works
+    def _monitor(self) -> Any:
+        """The live risk monitor the guards use (None: guards off, or none installed)."""
+        return self.bb.get(LIVE_RISK_KEY) if self.guard and self.bb.exists(LIVE_RISK_KEY) else None
 
-        def work() -> Planned:
-            assert self._planner is not None and self._collision is not None
-            results = assess_task(self.estimate, task, self._planner, self._collision, q_start=q)
-            verdict = None
-            if self.physics is not None:
-                results, verdict = self.physics.check(self.estimate, results, q_start=q)
-            return results, verdict, self._subtrees(results, monitor)
-
-        if self.background:
-            if self._pool is None:
-                self._pool = concurrent.futures.ThreadPoolExecutor(1, thread_name_prefix=f"plan-{self.name}")
-            self._future = self._pool.submit(work)
-        else:
-            future: concurrent.futures.Future[Planned] = concurrent.futures.Future()
-            try:
-                future.set_result(work())
-            except Exception as exc:
-                future.set_exception(exc)
-            self._future = future
+    def _submit(self) -> None:
+        """Hand the decision's job to the worker, or (``background`` False) work it out now."""
+        assert self._job is not None
+        self._ticket, self._lost, self._result, self._built = None, None, None, {}
+        if not self.background:
+            self.setup()
+            assert self._local is not None
+            self._local.monitor = self._monitor()
+            self._result = self._local.run(self._job)
+            return
+        if self.worker is None:  # a selector on its own: its own worker
+            jobs = self.physics.pool.jobs if self.physics is not None else 0
+            self.worker, self._own_worker = PlanningWorker(self.estimate.scenario, jobs), True
+        try:
+            self._ticket = self.worker.submit(self._job)
+        except WorkerLost as lost:  # gone while idle: the next poll replaces it
+            self._lost = lost
 
     def _object_state(self) -> dict[str, Any] | None:
         if not self.task.object:  # a task that moves no object (a press)
@@ -305,19 +326,7 @@ class RiskSelector(py_trees.composites.Composite):
     def _step(self) -> Status | None:
         """Advance the planning/approval state machine; None means: tick the chosen child."""
         if self.phase == "planning":
-            assert self._future is not None
-            if not self._future.done():
-                self.feedback_message = f"planning {self.name}"
-                return Status.RUNNING
-            try:
-                results, verdict, subtrees = self._future.result()
-            except ExecutiveError as exc:
-                return self._finish("failed", {"mode": "planning", "detail": str(exc)})
-            except Exception as exc:  # a defect in planning must still end in the log
-                detail = f"planning raised {type(exc).__name__}: {exc} (a defect: please report it)"
-                return self._finish("failed", {"mode": "planning", "detail": detail})
-            self._log_physics(results, verdict)
-            return self._decide(results, subtrees)
+            return self._planning_step()
         if self.phase == "awaiting_approval":
             assert self.pending is not None
             decision = self.pending.decision
@@ -328,6 +337,82 @@ class RiskSelector(py_trees.composites.Composite):
         if self.phase == "executing":
             return None
         raise ExecutiveError(f"{self.name}: tick in phase '{self.phase}'")
+
+    def _planning_step(self) -> Status | None:
+        """Wait for the decision's result; then, a tick each: log it, build the feasible
+        alternatives' subtrees one by one, and decide (in one tick when planning in the tick)."""
+        spread = self.background  # from a worker: keep every tick short
+        if self._result is None:
+            try:
+                self._result = self._receive()
+            except WorkerLost as lost:
+                return self._on_worker_lost(lost)
+            if self._result is None:
+                self.feedback_message = f"planning {self.name}"
+                return Status.RUNNING
+            self._losses = 0
+            failure = self._result.failure
+            if failure is not None:
+                return self._finish("failed", {"mode": "planning", "detail": failure.detail()})
+            self._log_physics(self._result.results, self._result.verdict)
+            if spread:
+                return Status.RUNNING
+        feasible = ranked(self._result.results, self.ordering)
+        for alt in feasible:
+            if alt.name in self._built:
+                continue
+            assert alt.plan is not None
+            subtree = self.kind.subtree(alt.plan, guard=self.guard)
+            subtree.setup_with_descendants()
+            self._built[alt.name] = subtree
+            if spread:
+                self.feedback_message = f"planning {self.name}: {alt.name} ready"
+                return Status.RUNNING
+        if feasible:
+            self._adopt(feasible[0])
+        return self._decide(self._result.results, self._built)
+
+    def _receive(self) -> PlanningResult | None:
+        """The worker's result if it has come (None: not yet); raises WorkerLost."""
+        if self._lost is not None:
+            raise self._lost
+        assert self.worker is not None and self._ticket is not None
+        result = self.worker.poll(self._ticket)
+        if result is not None:
+            self._ticket = None
+        return result
+
+    def _on_worker_lost(self, lost: WorkerLost) -> Status:
+        """Log the lost worker, start a fresh one and re-plan from where the robot holds."""
+        assert self.worker is not None
+        self._losses += 1
+        fields = {"event": "lost", "reason": lost.reason, "pid": lost.pid, "losses": self._losses}
+        if self._losses > MAX_WORKER_LOSSES:
+            self.log.record("planning_worker", task=self.name, **fields, action="fail the task")
+            detail = f"the planning worker was lost {self._losses} times in a decision; last it {lost.reason}"
+            return self._finish("failed", {"mode": "planning", "detail": detail})
+        replacement = self.worker.replace()
+        self.log.record(
+            "planning_worker", task=self.name, **fields, action="replaced", replacement=replacement
+        )
+        self._start_planning()  # the robot held meanwhile: re-plan from where it is
+        return Status.RUNNING
+
+    def _adopt(self, best: AlternativeRisk) -> None:
+        """Hand the worker's prepared knot distances of ``best``'s guarded motions to the monitor."""
+        monitor = self._monitor()
+        if monitor is None or best.plan is None or self._result is None:
+            return
+        for knots in self._result.knots:
+            trajectory = best.plan.trajectories.get(knots.step)
+            if trajectory is not None:
+                monitor.adopt(
+                    trajectory.qpos,
+                    carried=knots.carried,
+                    allow=knots.allow,
+                    distances=knots.distances,
+                    names=knots.names,
+                )
 
     def _log_physics(self, results: Sequence[AlternativeRisk], verdict: PhysicsVerdict | None) -> None:
         """One ``dry_run`` line per alternative run in physics, and a ``rollouts`` line if any ran."""
@@ -348,7 +433,7 @@ class RiskSelector(py_trees.composites.Composite):
     ) -> Status | None:
         for alt in results:
             self.log.record("plan", task=self.name, **risk_row(alt, self.ordering))
-        feasible = self._ranked(results)
+        feasible = ranked(results, self.ordering)
         self.ranking = feasible
         self.results = list(results)
         self._swap_children(feasible, subtrees)
@@ -422,38 +507,10 @@ class RiskSelector(py_trees.composites.Composite):
             return self._finish("aborted", {"mode": "denied", "detail": f"denied by {decision.by}"})
         return self._finish("aborted", {"mode": "aborted", "detail": f"aborted by {decision.by}"})
 
-    def _ranked(self, results: Sequence[AlternativeRisk]) -> list[AlternativeRisk]:
-        """The feasible alternatives, lowest ordering value first."""
-        return sorted(
-            (a for a in results if a.risk is not None),
-            key=lambda a: a.risk.value(self.ordering) if a.risk else 0.0,
-        )
-
-    def _subtrees(
-        self, results: Sequence[AlternativeRisk], monitor: Any
-    ) -> dict[str, py_trees.behaviour.Behaviour]:
-        """Build and set up the feasible alternatives' subtrees (runs in the planning thread).
-
-        With a live risk ``monitor``, the lowest-risk alternative's guarded motions have
-        their planned distances computed now (:meth:`behaviours.guard.RiskGuard.prepare`);
-        any other alternative's guards compute theirs as they run.
-        """
-        subtrees: dict[str, py_trees.behaviour.Behaviour] = {}
-        for i, alt in enumerate(self._ranked(results)):
-            assert alt.plan is not None
-            subtree = self.kind.subtree(alt.plan, guard=self.guard)
-            subtree.setup_with_descendants()
-            if monitor is not None and i == 0:
-                for node in subtree.iterate():
-                    if isinstance(node, RiskGuard):
-                        node.prepare(monitor)
-            subtrees[alt.name] = subtree
-        return subtrees
-
     def _swap_children(
         self, ranked: Sequence[AlternativeRisk], subtrees: dict[str, py_trees.behaviour.Behaviour]
     ) -> None:
-        """Make the ready subtrees the children, lowest risk first (nothing built in the tick)."""
+        """Make the built subtrees the children, lowest risk first."""
         for child in list(self.children):
             self.remove_child(child)
         self._by_name = {}

@@ -260,6 +260,7 @@ class LiveRiskMonitor:
         self._geometry_arrays = (m.body_pos, m.body_quat, m.geom_pos, m.geom_quat, m.geom_size)
         self._geometry = self._geometry_key()
         self.knots_computed = 0  # planned knots whose distance was computed (not memoised)
+        self.knots_adopted = 0  # planned knots whose distance another monitor computed (adopt)
         # The measured configuration's distance: the last exact one per (carried, allow), with
         # the poses of the geoms that move with the configuration (robot, objects) at that time.
         model = self.collision.model
@@ -318,6 +319,59 @@ class LiveRiskMonitor:
             with self._lock:
                 self._refresh()
                 self._fill(self._track(qpos, carried, allow), k, k + 1, carried, allow)
+
+    def memo(
+        self, trajectory_qpos: FloatArray
+    ) -> list[tuple[str | None, frozenset[tuple[str, str]], FloatArray, list[tuple[str, str]]]]:
+        """What is memoised of a planned trajectory's knots, to hand to another monitor (:meth:`adopt`).
+
+        Args:
+            trajectory_qpos: the very array the guard checks (its identity keys the memo).
+
+        Returns:
+            One ``(carried, allow, distances, closest pairs)`` per memo of that array (copies;
+            NaN where a knot is not computed).
+        """
+        with self._lock:
+            self._refresh()
+            return [
+                (carried, allow, track.dist.copy(), list(track.names))
+                for (key, carried, allow), track in self._tracks.items()
+                if key == id(trajectory_qpos) and track.qpos is trajectory_qpos
+            ]
+
+    def adopt(
+        self,
+        trajectory_qpos: FloatArray,
+        *,
+        carried: str | None,
+        allow: frozenset[tuple[str, str]],
+        distances: FloatArray,
+        names: list[tuple[str, str]],
+    ) -> None:
+        """Memoise knot distances another monitor computed (:meth:`memo`), as :meth:`prepare` would.
+
+        A knot's distance depends on the knot, ``carried``, ``allow`` and the estimate's geometry
+        only, so distances from a monitor of the same scenario's estimate (a planning worker
+        process's) are the ones this monitor would compute.
+
+        Args:
+            trajectory_qpos: the very array the guard will check (its identity keys the memo).
+            carried, allow: as for :meth:`prepare`.
+            distances: per knot, the guard's distance (NaN: not computed).
+            names: per knot, the closest (robot body, environment body).
+        """
+        qpos = np.asarray(trajectory_qpos, dtype=float)
+        dist = np.array(distances, dtype=float)
+        if dist.shape != (len(qpos),) or len(names) != len(qpos):
+            raise ValueError(f"{len(dist)} distances and {len(names)} names for {len(qpos)} knots")
+        with self._lock:
+            self._refresh()
+            track = self._track(qpos, carried, allow)
+            track.dist, track.names = dist, [(robot, env) for robot, env in names]
+            track.missing = int(np.isnan(dist).sum())
+            track.window = (-1, -1, -1)
+            self.knots_adopted += len(qpos) - track.missing
 
     def configuration(self, measured_qpos: FloatArray, planned_qpos: FloatArray) -> FloatArray:
         """The robot where it is measured, the objects where the plan has them (the estimate)."""

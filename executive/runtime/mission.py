@@ -2,7 +2,8 @@
 
 The tree is a Sequence of one :class:`executive.decision.selector.RiskSelector` per task of the
 mission. Each ``tick()`` ticks the tree once and never blocks (planning runs in a
-worker thread, approvals are answered asynchronously); when the executive owns the
+worker process, :mod:`executive.decision.planning_worker`; approvals are answered
+asynchronously); when the executive owns the
 physics (the default: a truth world sampled from the scenario's uncertainty, or
 equal to the estimate with ``truth="exact"``) it then steps the simulation one
 control period. A host that drives its own robot passes ``robot=`` (an object with
@@ -39,12 +40,13 @@ from behaviours.robot_access import install
 from executive.decision.approval import ApprovalChannel, ApprovalDecision, PendingApproval, make_channel
 from executive.decision.audit import AuditLog, now_iso, write_summary
 from executive.decision.physics_check import PhysicsCheck
+from executive.decision.planning_worker import PlanningWorker
 from executive.decision.selector import RiskSelector, task_label
 from executive.execution.simulated import SimulatedRobot
 from executive.execution.tick_record import TickRecorder
 from executive.monitoring.detectors import FailureDetector
 from executive.monitoring.live_risk import LiveRiskMonitor
-from executive.schema.types import Scenario
+from executive.schema.types import Scenario, Task
 from executive.world.model import World, build, sample_perturbation
 from executive.world.observation import SimulatedSensor, refresh
 
@@ -127,7 +129,7 @@ class Executive:
             (:class:`executive.decision.audit.RunFolderError`) unless ``resume``.
         control_dt: control period (s) of a tick.
         guard: live risk guards around every motion.
-        background: plan in a worker thread (False: inside the tick, blocking).
+        background: plan in a warm worker process (False: inside the tick, blocking).
         pace_waiting: while the robot only holds (planning, awaiting approval), step the
             bundled physics in real time instead of as fast as possible.
     """
@@ -193,23 +195,13 @@ class Executive:
             self.truth_label = "the host's robot"
             self.owns_physics = False
         self.robot = robot
-        # Every decision is checked in physics (dry runs, rollouts) in warm worker processes.
+        # Every decision is checked in physics (dry runs, rollouts) in warm worker processes:
+        # the planning worker's own (it plans, assesses and checks), or these when planning in the tick.
         self.physics = PhysicsCheck(sc.risk.rollouts.jobs)
-        self.physics.pool.warm()  # the workers start while the world and the tree are built
-        self.selectors = [
-            RiskSelector(
-                f"task{i}",
-                task,
-                estimate=self.estimate,
-                channel=self.channel,
-                log=self.log,
-                timeout_s=sc.approval.timeout_s,
-                guard=guard,
-                physics=self.physics,
-                background=background,
-            )
-            for i, task in enumerate(sc.mission)
-        ]
+        self.planning = PlanningWorker(sc, sc.risk.rollouts.jobs) if background else None
+        if self.planning is None:
+            self.physics.pool.warm()  # the workers start while the world and the tree are built
+        self.selectors = [self._selector(i, task, guard, background) for i, task in enumerate(sc.mission)]
         self.root = py_trees.composites.Sequence(name=sc.name, memory=True, children=list(self.selectors))
         self.tree = py_trees.trees.BehaviourTree(self.root)
         self.monitor = LiveRiskMonitor(self.estimate, sc.risk.guard) if guard else None
@@ -239,6 +231,21 @@ class Executive:
         )
         if not self.owns_physics:  # a host's robot: the estimate starts from what it sees
             self.log.record("observation", task=None, **refresh(self.estimate, robot, {}, "at_start"))
+
+    def _selector(self, i: int, task: Task, guard: bool, background: bool) -> RiskSelector:
+        """The selector of the mission's task ``i``."""
+        return RiskSelector(
+            f"task{i}",
+            task,
+            estimate=self.estimate,
+            channel=self.channel,
+            log=self.log,
+            timeout_s=self.scenario.approval.timeout_s,
+            guard=guard,
+            physics=self.physics,
+            background=background,
+            worker=self.planning,
+        )
 
     def _install(self) -> None:
         install(self.robot)
@@ -369,6 +376,8 @@ class Executive:
         for selector in self.selectors:
             selector.shutdown()
         self.physics.close()
+        if self.planning is not None:
+            self.planning.close()
         self.tree.shutdown()
         self.log.close()
 

@@ -1,0 +1,306 @@
+"""The planning worker: one warm process that does the selectors' heavy work, off the ticking process.
+
+Python threads share one interpreter lock, so planning in a thread of the process that ticks
+delays its ticks (a tick waits for the lock up to the interpreter's switch interval, and
+longer while the planner keeps taking it back). A :class:`PlanningWorker` runs the work of
+:mod:`executive.decision.planning_job` in a process of its own instead: spawned once (clean:
+no inherited MuJoCo state), it builds the scenario's estimate world, a live risk monitor and a
+physics check with its own warm rollout processes, and then serves jobs. A selector
+:meth:`~PlanningWorker.submit` s a :class:`~executive.decision.planning_job.PlanningJob` (a few
+kB of plain data) and :meth:`~PlanningWorker.poll` s for the result on later ticks; a thread of
+the ticking process receives it (it waits in ``read``, without the lock, and unpickles the
+arrays, about 1 ms for book_transfer's 2.4 MB), so a tick only takes it.
+
+The worker runs at a lower priority (``nice``, default :data:`NICE`; its rollout processes
+inherit it): the ticking process gets the cores first when it wakes.
+
+Faults are noticed by the process that ticks, on its next :meth:`~PlanningWorker.poll`:
+
+* the worker died (its exit code, e.g. killed by SIGKILL): at once;
+* the worker hangs: a thread in the worker writes a heartbeat (a shared double, the
+  monotonic clock) every :data:`BEAT_S`; a heartbeat older than :data:`HANG_S` is a hang. The
+  thread is not the job: a plan that takes long (a G1's several seconds) keeps beating. Before
+  the worker's first heartbeat (it is importing) the limit is :data:`START_S`.
+
+``poll`` then raises :class:`WorkerLost` (its reason says which); :meth:`~PlanningWorker.replace`
+kills the old process (a hung one too) and starts a fresh one, and the job is submitted again.
+A rollout process whose planning worker died exits by itself
+(:func:`executive.decision.physics_check.exit_with_parent`).
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import multiprocessing.connection
+import multiprocessing.process
+import multiprocessing.util
+import os
+import signal
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+from executive.errors import ExecutiveError
+
+if TYPE_CHECKING:
+    from executive.decision.planning_job import PlanningJob, PlanningResult
+    from executive.schema.types import Scenario
+
+__all__ = ["BEAT_S", "HANG_S", "NICE", "START_S", "PlanningWorker", "WorkerLost"]
+
+#: The worker's heartbeat period (s).
+BEAT_S = 0.1
+#: A heartbeat older than this (s) is a hung worker: noticed within a second of the hang.
+HANG_S = 0.75
+#: How long (s) a starting worker may take to its first heartbeat (the interpreter's imports).
+START_S = 120.0
+#: The worker's niceness (added to the ticking process's): the ticks get the cores first.
+NICE = 10
+
+
+class WorkerLost(ExecutiveError):
+    """The planning worker died or hangs; ``reason`` says which, ``pid`` was its process."""
+
+    def __init__(self, reason: str, pid: int | None) -> None:
+        self.reason = reason
+        self.pid = pid
+        super().__init__(f"the planning worker (pid {pid}) {reason}")
+
+
+def _beat(beat: Any, parent: int, stop: threading.Event) -> None:
+    """The worker's heartbeat thread: the time now, every BEAT_S; the worker ends with its parent."""
+    while True:
+        if os.getppid() != parent:  # the ticking process is gone: nobody will ask for work
+            os._exit(0)
+        beat.value = time.monotonic()
+        if stop.wait(BEAT_S):
+            return
+
+
+def _serve(
+    conn: multiprocessing.connection.Connection,
+    beat: Any,
+    scenario: Scenario,
+    jobs: int,
+    nice: int,
+    parent: int,
+) -> None:
+    """The worker process: heartbeat first, then build everything once, then serve jobs until told to stop."""
+    stop = threading.Event()
+    threading.Thread(target=_beat, args=(beat, parent, stop), name="heartbeat", daemon=True).start()
+    # Ctrl-C reaches the whole foreground process group: the ticking process stops the worker.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    if nice:
+        os.nice(nice)
+    from executive.decision.planning_job import Planning
+
+    planning = Planning.of_scenario(scenario, jobs)
+    conn.send(("ready", 0, os.getpid()))
+    try:
+        while True:
+            try:
+                message = conn.recv()
+            except EOFError:
+                break
+            if message is None:
+                break
+            ticket, job = message
+            conn.send(("result", ticket, planning.run(job)))
+    finally:
+        stop.set()
+        planning.close()
+
+
+@dataclass
+class _Instance:
+    """One worker process and what the ticking process keeps of it."""
+
+    process: multiprocessing.process.BaseProcess
+    conn: multiprocessing.connection.Connection
+    beat: Any  # shared double: the worker's last heartbeat (time.monotonic), 0 before the first
+    started: float
+    inbox: dict[int, PlanningResult] = field(default_factory=dict)
+    pending: set[int] = field(default_factory=set)  # tickets sent and neither answered nor forgotten
+    ready: bool = False
+
+    def receive(self) -> None:
+        """The receiving thread: results into the inbox until the worker's end of the pipe closes."""
+        while True:
+            try:
+                kind, ticket, payload = self.conn.recv()
+            except (EOFError, OSError):
+                break
+            if kind == "ready":
+                self.ready = True
+            elif ticket in self.pending:  # not forgotten meanwhile
+                self.inbox[ticket] = payload.native()
+                self.pending.discard(ticket)
+
+    def fault(self, now: float, hang_s: float) -> str | None:
+        """Why this worker can no longer answer (None: it can)."""
+        code = self.process.exitcode
+        if code is not None:
+            if code < 0:
+                return f"died (killed by {signal.Signals(-code).name})"
+            return f"exited with code {code}"
+        beat = self.beat.value
+        if beat == 0.0:
+            if now - self.started > START_S:
+                return f"did not start: no heartbeat {now - self.started:.0f} s after it was spawned"
+            return None
+        if now - beat > hang_s:
+            return f"hangs: no heartbeat for {now - beat:.2f} s (limit {hang_s:g} s)"
+        return None
+
+
+class _Processes:
+    """The worker process serving now and those replaced; kept apart from :class:`PlanningWorker`
+    so that the interpreter's exit can close them without keeping the worker object alive."""
+
+    def __init__(self, now: _Instance) -> None:
+        self.now = now
+        self.retired: list[multiprocessing.process.BaseProcess] = []
+        self.closed = False
+
+    def close(self) -> None:
+        """Stop the worker (it ends its rollout processes) and wait for it; kill it if it is busy
+        or does not stop."""
+        if self.closed:
+            return
+        self.closed = True
+        now = self.now
+        if now.pending or not now.ready:  # busy (or still building): nothing to wait for
+            now.process.kill()
+        else:
+            try:
+                now.conn.send(None)
+            except (BrokenPipeError, OSError):
+                pass
+            now.process.join(timeout=10.0)
+            if now.process.exitcode is None:
+                now.process.kill()
+        now.process.join(timeout=5.0)
+        for process in self.retired:
+            process.join(timeout=5.0)
+        now.conn.close()
+
+
+class PlanningWorker:
+    """A warm process that does the selectors' planning, assessment and physics checks.
+
+    Args:
+        scenario: the scenario whose estimate the worker builds (once per process).
+        jobs: the physics check's rollout processes (``risk.rollouts.jobs``), started by the
+            worker (0: the worker runs no physics check).
+        nice: the worker's niceness increment (0: none).
+        hang_s: a heartbeat older than this (s) is a hang.
+
+    The process is spawned at once and builds its world while the caller goes on. Use
+    :meth:`submit` and :meth:`poll` per job, :meth:`replace` after :class:`WorkerLost`,
+    :meth:`close` at the end (also done when the interpreter exits, or this object is collected).
+    """
+
+    def __init__(self, scenario: Scenario, jobs: int, *, nice: int = NICE, hang_s: float = HANG_S) -> None:
+        self.scenario = scenario
+        self.jobs = jobs
+        self.nice = nice
+        self.hang_s = hang_s
+        self.replaced = 0  # workers replaced so far
+        self._ctx = multiprocessing.get_context("spawn")
+        self._next_ticket = 0
+        self._processes = _Processes(self._start())
+        # Before the interpreter joins its children at exit: a worker left running would be waited for.
+        multiprocessing.util.Finalize(self, self._processes.close, exitpriority=10)
+
+    def _start(self) -> _Instance:
+        conn, child = self._ctx.Pipe()
+        beat = self._ctx.RawValue("d", 0.0)
+        args = (child, beat, self.scenario, self.jobs, self.nice, os.getpid())
+        process = self._ctx.Process(target=_serve, args=args, name="planning-worker")
+        process.start()
+        child.close()
+        instance = _Instance(process, conn, beat, time.monotonic())
+        threading.Thread(target=instance.receive, name="planning-results", daemon=True).start()
+        return instance
+
+    @property
+    def _now(self) -> _Instance:
+        return self._processes.now
+
+    @property
+    def pid(self) -> int | None:
+        """The worker process's id."""
+        return self._now.process.pid
+
+    @property
+    def ready(self) -> bool:
+        """Whether the worker has built its world and serves jobs."""
+        return self._now.ready
+
+    def wait_ready(self, timeout_s: float = START_S) -> bool:
+        """Block until the worker serves jobs (False: it did not within ``timeout_s``, or it died)."""
+        deadline = time.monotonic() + timeout_s
+        while not self._now.ready and time.monotonic() < deadline:
+            if self._now.process.exitcode is not None:
+                return False
+            time.sleep(0.01)
+        return self._now.ready
+
+    def submit(self, job: PlanningJob) -> int:
+        """Send ``job`` to the worker (queued while it starts); the ticket to :meth:`poll` with.
+
+        Raises:
+            WorkerLost: the worker is already gone (its end of the pipe is closed).
+            ExecutiveError: the worker was closed.
+        """
+        if self._processes.closed:
+            raise ExecutiveError("the planning worker is closed")
+        self._next_ticket += 1
+        ticket = self._next_ticket
+        now = self._now
+        now.pending.add(ticket)
+        try:
+            now.conn.send((ticket, job))
+        except (BrokenPipeError, OSError) as exc:
+            now.pending.discard(ticket)
+            reason = now.fault(time.monotonic(), self.hang_s) or f"cannot be reached ({exc})"
+            raise WorkerLost(reason, self.pid) from exc
+        return ticket
+
+    def poll(self, ticket: int) -> PlanningResult | None:
+        """The result of ``ticket`` if it has come (taken out), else None. Never blocks.
+
+        Raises:
+            WorkerLost: the worker died or hangs (:meth:`replace` it and submit again).
+        """
+        result = self._now.inbox.pop(ticket, None)
+        if result is not None:
+            return result
+        reason = self._now.fault(time.monotonic(), self.hang_s)
+        if reason is not None:
+            raise WorkerLost(reason, self.pid)
+        return None
+
+    def forget(self, ticket: int) -> None:
+        """Drop ``ticket``: its result, if it still comes, is thrown away (a halted selector's)."""
+        self._now.pending.discard(ticket)
+        self._now.inbox.pop(ticket, None)
+
+    def replace(self) -> int | None:
+        """Kill the worker (if it still runs) and start a fresh one; its pid.
+
+        Tickets not answered are dropped: submit their jobs again.
+        """
+        old = self._now.process
+        if old.exitcode is None:
+            old.kill()
+        self._processes.retired.append(old)
+        self._processes.now = self._start()
+        self.replaced += 1
+        return self.pid
+
+    def close(self) -> None:
+        """Stop the worker (it ends its rollout processes) and wait for it (kill it if busy)."""
+        self._processes.close()
