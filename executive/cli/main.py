@@ -23,6 +23,7 @@ from executive.schema.types import Scenario
 from executive.world.model import World, build
 
 if TYPE_CHECKING:
+    from executive.console.commands import RunConsole
     from executive.decision.assessment import AlternativeRisk
     from executive.report.render import VideoRecorder
 
@@ -146,7 +147,16 @@ def _run_mission(scenario: Scenario, args: argparse.Namespace) -> int:
         raise ExecutiveError("--viewer needs a display (DISPLAY is not set); use --video FILE.gif offscreen")
     folder = Path(args.out) if args.out else run_folder(scenario.name)
     truth: str | int | None = "exact" if args.exact else args.seed
-    executive = Executive(scenario, approval=args.approve, truth=truth, out=folder, guard=not args.no_guard)
+    console = _open_console(args, scenario.name)
+    approval = console.approval(args.approve) if console is not None else args.approve
+    try:
+        executive = Executive(scenario, approval=approval, truth=truth, out=folder, guard=not args.no_guard)
+    except BaseException:
+        if console is not None:
+            console.close()
+        raise
+    if console is not None:
+        console.attach(executive)
     freeze_startup_heap()  # no full garbage collection pause in the middle of a motion (its doc)
     display = MissionDisplay(executive, sys.stdout)
     recorder = viewer = None
@@ -169,6 +179,8 @@ def _run_mission(scenario: Scenario, args: argparse.Namespace) -> int:
                 recorder.capture()
             if viewer is not None:
                 viewer.sync()
+            if console is not None:
+                console.pace(executive)
     except KeyboardInterrupt:
         executive.stop("interrupted by the operator (Ctrl-C): tree halted, robot holding")
     finally:
@@ -176,10 +188,27 @@ def _run_mission(scenario: Scenario, args: argparse.Namespace) -> int:
             executive.stop("stopped by an error")
         if viewer is not None:
             viewer.close()
+        if console is not None:
+            console.close()
     display.finish()
     if recorder is not None:
         _save_video(recorder)
     return EXIT_OK if executive.outcome == "success" else EXIT_FAILED
+
+
+def _open_console(args: argparse.Namespace, title: str) -> RunConsole | None:
+    """``--console``: the page, started before anything is planned (None without the option)."""
+    if not args.console:
+        return None
+    from executive.console.commands import open_for_run
+
+    return open_for_run(args.console_port, title)
+
+
+def _cmd_console(args: argparse.Namespace) -> int:
+    from executive.console.commands import serve
+
+    return serve(args.target, args.port)
 
 
 def _save_video(recorder: VideoRecorder) -> None:
@@ -363,6 +392,7 @@ def _whole_number(low: int, high: int, what: str, high_text: str = "") -> Callab
 
 _SEED = _whole_number(0, 2**63 - 1, "a seed", "2**63-1")
 _PIXELS = _whole_number(1, 16384, "pixels")
+_PORT = _whole_number(0, 65535, "a TCP port on 127.0.0.1; 0: any free one")
 _ROLLOUTS = _whole_number(0, 10_000, "rollouts per alternative; 0: off")
 _TRIALS = _whole_number(1, 1_000_000, "trials")
 _JOBS = _whole_number(1, 1024, "worker processes")
@@ -388,6 +418,7 @@ def _parser() -> argparse.ArgumentParser:
     _add_fidelity(sub)
     tree_command.add_parser(sub, _SCENARIO_HELP)
     replay_command.add_parser(sub, _PIXELS)
+    _add_console(sub)
     return parser
 
 
@@ -442,6 +473,13 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     p.add_argument("--viewer", action="store_true", help="open the MuJoCo viewer (needs a display)")
     p.add_argument("--video", metavar="FILE.gif", help="record an offscreen video of the run")
     p.add_argument("--no-guard", action="store_true", help="run without the live risk guards")
+    p.add_argument(
+        "--console",
+        action="store_true",
+        help="the operator's console: a page on 127.0.0.1 showing the run live, approvals answered there "
+        '(pip install ".[console]")',
+    )
+    p.add_argument("--console-port", type=_PORT, default=8080, help="the console's port (default 8080)")
     p.set_defaults(func=_cmd_run)
 
 
@@ -489,6 +527,18 @@ def _add_fidelity(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     )
     p.add_argument("--resume", action="store_true", help="complete the suite in --out DIR")
     p.set_defaults(func=_cmd_fidelity)
+
+
+def _add_console(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
+    """The console command."""
+    p = sub.add_parser(
+        "console",
+        help="the operator's console on 127.0.0.1: a run folder's decisions, or a scenario's alternatives "
+        'planned and checked but not executed (pip install ".[console]")',
+    )
+    p.add_argument("target", help="a run folder, or " + _SCENARIO_HELP)
+    p.add_argument("--port", type=_PORT, default=8080, help="the page's port (default 8080)")
+    p.set_defaults(func=_cmd_console)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

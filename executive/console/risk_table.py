@@ -1,0 +1,124 @@
+"""The risk of a task's alternatives as the console shows it: markdown tables from decision rows.
+
+A row is what the audit log's ``plan`` line holds (:func:`executive.decision.selector.risk_row`):
+``name``, ``feasible``, ``risk`` (per mode probability, ``combined`` with its bounds,
+``weighted_sum``, ``expected_loss``), ``value`` (the ordering quantity), ``physics`` (the dry run
+and, when rollouts ran, per mode the analytic probability, the failures, the fused value and
+its interval) and ``reason`` (why infeasible). The same rows come from a live selector and from
+a run folder, so a run's page and a replay's read alike.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+__all__ = ["MODES", "number", "physics_table", "ranked", "risk_table", "verdict_line"]
+
+MODES = ("collision", "fall", "grasp")
+_MODE_LABEL = {"collision": "collision", "fall": "fall", "grasp": "drop"}
+
+
+def number(value: float | None) -> str:
+    """A probability or loss for people: 4 significant digits, tiny values in exponent form."""
+    if value is None:
+        return "-"
+    if value != 0 and abs(value) < 1e-6:
+        return "≈0"
+    if value != 0 and abs(value) < 1e-4:
+        return f"{value:.1e}"
+    return f"{value:.4g}"
+
+
+def _short(value: float) -> str:
+    """A probability in 2 significant digits (the intervals of a few rollouts are wide)."""
+    return "≈0" if abs(value) < 1e-6 else f"{value:.2g}"
+
+
+def ranked(rows: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
+    """Feasible rows lowest value first, then the infeasible ones in their order."""
+    feasible = sorted((r for r in rows if r.get("value") is not None), key=lambda r: float(r["value"]))
+    return [*feasible, *(r for r in rows if r.get("value") is None)]
+
+
+def verdict_line(rows: Sequence[Mapping[str, Any]], ordering: str, threshold: float) -> str:
+    """What the ranking means: the lowest alternative, and whether it needs approval."""
+    order = ranked(rows)
+    if not order or order[0].get("value") is None:
+        return "**no feasible alternative**"
+    best = order[0]
+    value = float(best["value"])
+    if value > threshold:
+        return (
+            f"**{best['name']}** is lowest ({ordering} {number(value)}) but **above the threshold "
+            f"{threshold:g}: it needs approval**"
+        )
+    return f"**{best['name']}** is lowest ({ordering} {number(value)}), within the threshold {threshold:g}"
+
+
+def risk_table(rows: Sequence[Mapping[str, Any]], ordering: str, threshold: float) -> str:
+    """Markdown: one line per alternative, ranked, with each failure mode's probability.
+
+    Columns: rank, alternative, collision, fall, drop (the grasp mode), P(any), expected loss,
+    and the seed's weighted sum when that is the ordering; the ordering's column is marked
+    ``!`` where it is above the threshold. Infeasible alternatives follow with their reason.
+    """
+    columns = {"probability": "combined", "expected_loss": "expected_loss", "weighted_sum": "weighted_sum"}
+    keys = ["collision", "fall", "grasp", "combined", "expected_loss"]
+    heads = ["collision", "fall", "drop", "P(any)", "exp. loss"]
+    if ordering == "weighted_sum":
+        keys.append("weighted_sum")
+        heads.append("seed sum")
+    ranked_key = columns.get(ordering)
+    lines = ["| # | alternative | " + " | ".join(heads) + " |", "|---|---|" + "---|" * len(heads)]
+    for i, row in enumerate(ranked(rows), 1):
+        risk = row.get("risk")
+        if row.get("value") is None or not risk:
+            reason = str(row.get("reason") or "infeasible").replace("|", "/")
+            lines.append(f"| - | {row['name']} | infeasible: {reason} |" + " |" * (len(heads) - 1))
+            continue
+        above = float(row["value"]) > threshold
+        cells = [number(risk.get(k)) + (" !" if k == ranked_key and above else "") for k in keys]
+        lines.append(f"| {i} | **{row['name']}** | " + " | ".join(cells) + " |")
+    lines.append("")
+    lines.append(
+        f"ranked by {ordering}; threshold **{threshold:g}**; {verdict_line(rows, ordering, threshold)}"
+    )
+    return "\n".join(lines)
+
+
+def physics_table(rows: Sequence[Mapping[str, Any]]) -> str:
+    """Markdown: what physics said per alternative: the dry run, and with rollouts the failures
+    counted and per mode ``analytic → fused [credible interval]``. Empty without a check."""
+    checked = [r for r in ranked(rows) if r.get("physics")]
+    if not checked:
+        return ""
+    with_rollouts = any(r["physics"].get("modes") for r in checked)
+    head = "| alternative | dry run | rollouts |"
+    if with_rollouts:
+        head += "".join(f" {_MODE_LABEL[m]} |" for m in MODES)
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for row in checked:
+        physics = row["physics"]
+        dry = physics.get("dry_run", {})
+        outcome = str(dry.get("outcome", "-"))
+        n = int(physics.get("rollouts", 0))
+        failures = {k: v for k, v in physics.get("outcomes", {}).items() if k != "success"}
+        rolled = (
+            f"{n}: " + (", ".join(f"{v} {k}" for k, v in sorted(failures.items())) or "no failure")
+            if n
+            else "-"
+        )
+        line = f"| {row['name']} | {outcome} | {rolled} |"
+        if with_rollouts:
+            modes = physics.get("modes", {})
+            for m in MODES:
+                v = modes.get(m)
+                line += (
+                    f" {_short(v['analytic'])} → {_short(v['fused'])} "
+                    f"[{_short(v['interval'][0])}, {_short(v['interval'][1])}] |"
+                    if v
+                    else " - |"
+                )
+        lines.append(line)
+    return "\n".join(lines)
