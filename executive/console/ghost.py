@@ -172,6 +172,7 @@ class GhostView:
         self._marks: list[Any] = []
         self._polygon: Any = None
         self._com: Any = None
+        self._tag: Any = None
         floor = world.ids.floor_geom
         self.floor_z = float(world.data.geom_xpos[floor][2]) if floor >= 0 else 0.0
 
@@ -190,7 +191,7 @@ class GhostView:
         with self.lock:
             if self._ghost is not None:
                 self._ghost.visible = False
-            for handle in [*self._marks, self._polygon, self._com]:
+            for handle in [*self._marks, self._polygon, self._com, self._tag]:
                 if handle is not None:
                     handle.visible = False
 
@@ -264,8 +265,16 @@ class GhostView:
         return marks
 
     def _feet(self, motion: PlannedMotion) -> None:
-        """The support polygon under the ghost's feet and its CoM, at the current time."""
+        """At the current time: the support polygon under the ghost's feet, its CoM, its name tag."""
         scene, z = self.server.scene, self.floor_z + LIFT
+        ids = self.world.ids
+        top = motion.pose(self.time).xpos[ids.head_body if ids.head_body is not None else ids.torso_body]
+        self._tag = scene.add_label(
+            f"{self.name}/tag",
+            f"plan: {motion.name} at t = {self.time:.2f} s",
+            position=(float(top[0]), float(top[1]), float(top[2]) + 0.25),
+            font_screen_scale=0.9,
+        )
         polygon = motion.support(self.time)
         if polygon is not None:
             self._polygon = scene.add_line_segments(
