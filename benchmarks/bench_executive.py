@@ -248,10 +248,14 @@ def run(
     control_dt: float = 0.02,
     recording: _PeriodRecording | _StepRecording | None = None,
     on_execute: Callable[[], None] | None = None,
+    setup: Callable[[Executive], None] | None = None,
 ) -> Run:
     """One run; ``recording`` (default a fresh :class:`_PeriodRecording`) records the
-    controls; ``on_execute`` is called when the execution phase starts."""
+    controls; ``on_execute`` is called when the execution phase starts; ``setup`` with the
+    executive before its first tick (to add tick listeners)."""
     ex = Executive(scenario, approval="auto", truth="exact", guard=guard, control_dt=control_dt)
+    if setup is not None:
+        setup(ex)
     assert ex.truth is not None
     model, data = ex.truth.model, ex.truth.data
     state0 = np.empty(mujoco.mj_stateSize(model, STATE))

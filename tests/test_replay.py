@@ -19,7 +19,7 @@ import pytest
 
 from executive.cli.main import main
 from executive.decision.physics_check import with_rollouts
-from executive.execution.tick_record import FORMAT, load_record
+from executive.execution.tick_record import FORMAT, load_record, preorder
 from executive.monitoring.live_risk import contact_support_margin
 from executive.report.replay import make_renderer, rebuild_world, step_spans, video_frames
 from executive.report.tree_view import mission_tree
@@ -39,6 +39,12 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     folder = tmp_path_factory.mktemp("replay") / "run"
     scenario = with_rollouts(load("book_transfer"), 0)
     executive = Executive(scenario, approval="auto", truth="exact", out=folder, guard=True)
+    snapshots: list[list[tuple[str, str]]] = []  # every node's status after every tick, in full
+
+    def snapshot(ex: Executive) -> None:
+        snapshots.append([(n.name, n.status.value) for n in preorder(ex.root)])
+
+    executive.tick_listeners.append(snapshot)
     summary = executive.run(time_limit_s=120)
     assert summary["outcome"] == "success", summary
     assert executive.truth is not None
@@ -54,6 +60,7 @@ def run(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         "final_rgb": final,
         "final_qpos": executive.truth.data.qpos.copy(),
         "ticks": executive.ticks,
+        "snapshots": snapshots,
         "guard_min": scenario.risk.guard.min_distance,
     }
 
@@ -75,6 +82,14 @@ def test_the_record_has_every_tick_and_the_final_state(run: dict[str, Any]) -> N
     assert np.linalg.norm(pos - np.array(placement["position"])) < 1e-3
     assert np.max(np.abs(record.qpos[-1] - run["final_qpos"])) < 1e-5
     assert abs(np.linalg.norm(quat) - 1.0) < 1e-6
+
+
+def test_the_recorded_statuses_are_every_node_at_every_tick(run: dict[str, Any]) -> None:
+    """The record keeps only changes, looking at the running path; replayed, they give every node's status."""
+    record = load_record(run["folder"])
+    for frame, full in enumerate(run["snapshots"], start=1):
+        replayed = [(node.name, status) for node, status in record.statuses_at(frame)]
+        assert replayed == full, frame
 
 
 def test_the_recorded_tree_is_the_one_executive_tree_shows(run: dict[str, Any]) -> None:

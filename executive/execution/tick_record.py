@@ -39,12 +39,14 @@ from __future__ import annotations
 import bisect
 import json
 import math
+import operator
 import os
+import struct
 import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, BinaryIO
+from typing import Any, BinaryIO, cast
 
 import mujoco
 import numpy as np
@@ -78,6 +80,11 @@ FloatArray = NDArray[np.float64]
 
 class RecordError(ExecutiveError):
     """A run folder without a readable record: the file and what is wrong with it."""
+
+
+_STATUS = operator.attrgetter("status")
+#: The fields of a frame before its qpos, packed as :func:`frame_dtype` lays them out.
+_FIELDS = struct.Struct("<Idfffhb")
 
 
 def frame_dtype(nq: int) -> np.dtype[Any]:
@@ -169,8 +176,7 @@ class TickRecorder:
         self._root: py_trees.behaviour.Behaviour = executive.root
         self._selectors = list(executive.selectors)
         self._frame = np.zeros(1, dtype=frame_dtype(self.nq))
-        self._row = self._frame[0]
-        self._q = self._frame["qpos"][0]
+        self._q = np.zeros(self.nq, dtype="<f4")
         self.frames = self._existing_frames()
         self._write_header(executive, model, truth)
         self._frames: BinaryIO = open(self.folder / FRAMES, "ab", buffering=0)
@@ -179,8 +185,12 @@ class TickRecorder:
         self._nodes: list[py_trees.behaviour.Behaviour] = []
         self._statuses: list[Status] = []
         self._shape: list[int] | None = None  # the selectors' children, by id: None before the first look
-        self._guards: list[tuple[int, RiskGuard]] = []
-        self._verdicts: list[Any] = []
+        self._index: dict[int, int] = {}  # id(node) -> its index
+        self._path: list[py_trees.behaviour.Behaviour] = []  # the running path of the last tick
+        self._path_index: list[int] = []
+        self._path_guards: list[tuple[int, py_trees.behaviour.Behaviour]] = []  # (index, guard) on it
+        self._parallel = False  # the running path goes through a Parallel
+        self._verdicts: dict[int, Any] = {}  # guard's node index -> its last verdict seen
         self._phases: list[str] = ["" for _ in self._selectors]
         self.closed = False
         self._event({"k": "start", "run_id": executive.log.run_id, "tick": executive.ticks})
@@ -221,17 +231,60 @@ class TickRecorder:
     def _restructure(self) -> None:
         """The tree's nodes changed (alternatives swapped in): a ``tree`` event and every status."""
         nodes = preorder(self._root)
-        index = {id(n): i for i, n in enumerate(nodes)}
+        self._index = {id(n): i for i, n in enumerate(nodes)}
         layout = [
-            [n.name, type(n).__name__, index[id(n.parent)] if n.parent is not None else -1] for n in nodes
+            [n.name, type(n).__name__, self._index[id(n.parent)] if n.parent is not None else -1]
+            for n in nodes
         ]
         self._nodes = nodes
         self._statuses = [n.status for n in nodes]
-        self._guards = [(i, n) for i, n in enumerate(nodes) if isinstance(n, RiskGuard)]
-        self._verdicts = [g.last_verdict for _, g in self._guards]
+        self._verdicts = {i: n.last_verdict for i, n in enumerate(nodes) if isinstance(n, RiskGuard)}
+        self._path = []
         self._event({"k": "tree", "nodes": layout})
         changed = [[i, STATUS_CODES[s]] for i, s in enumerate(self._statuses) if s != Status.INVALID]
         self._event({"k": "status", "s": changed})
+
+    def _running_path(self) -> list[py_trees.behaviour.Behaviour]:
+        """The root, then each composite's current child and each decorator's child, down to a leaf."""
+        path = []
+        node: Any = self._root
+        while node is not None:
+            path.append(node)
+            child = getattr(node, "current_child", None)
+            node = child if child is not None else getattr(node, "decorated", None)
+        return path
+
+    def _scan(self) -> None:
+        """Statuses that changed this tick (a ``status`` event), and the path's guards.
+
+        A node's status changes only when it is ticked or stopped. While the running path
+        (:meth:`_running_path`) is the one of the previous tick, only its nodes were ticked and
+        none was stopped (the tree's composites are memory Sequences and the RiskSelectors,
+        which tick their current child only), so only they are compared; a tick that changed
+        the path, a path through a Parallel, and every 64th frame compare every node.
+        """
+        path = self._running_path()
+        if path != self._path or self.frames % 64 == 0 or self._parallel:
+            self._path = path
+            self._path_index = index = [self._index[id(n)] for n in path]
+            self._path_guards = [(i, n) for i, n in zip(index, path, strict=True) if i in self._verdicts]
+            self._parallel = any(isinstance(n, py_trees.composites.Parallel) for n in path)
+            statuses = list(map(_STATUS, self._nodes))
+            changed = [
+                [i, STATUS_CODES[s]]
+                for i, (s, old) in enumerate(zip(statuses, self._statuses, strict=True))
+                if s is not old
+            ]
+            self._statuses = statuses
+        else:
+            changed = []
+            for i, node in zip(self._path_index, path, strict=True):
+                status = node.status
+                if status is not self._statuses[i]:
+                    self._statuses[i] = status
+                    changed.append([i, STATUS_CODES[status]])
+        if changed:
+            self._event({"k": "status", "s": changed})
 
     def __call__(self, executive: Any) -> None:
         """Record the tick that just ended (an ``Executive.tick_listeners`` entry)."""
@@ -241,16 +294,7 @@ class TickRecorder:
         if shape != self._shape:
             self._shape = shape
             self._restructure()
-        else:
-            statuses = [n.status for n in self._nodes]
-            if statuses != self._statuses:
-                changed = [
-                    [i, STATUS_CODES[s]]
-                    for i, (s, old) in enumerate(zip(statuses, self._statuses, strict=True))
-                    if s is not old
-                ]
-                self._statuses = statuses
-                self._event({"k": "status", "s": changed})
+        self._scan()
         phases = [s.phase for s in self._selectors]
         if phases != self._phases:
             self._phase_events(phases)
@@ -269,22 +313,19 @@ class TickRecorder:
         self._phases = phases
 
     def _write_frame(self, tick: int) -> None:
-        row = self._row
-        row["tick"] = tick
-        row["time"] = self._robot.time
-        row["wall"] = time.perf_counter() - self._t0
-        row["guard"], row["guard_ok"] = -1, -1
-        row["clearance"] = row["com_margin"] = math.nan
+        """One frame: the fields before ``qpos`` packed by :data:`_FIELDS`, then qpos as float32."""
+        guard, ok, clearance, com = -1, -1, math.nan, math.nan
         verdicts = self._verdicts
-        for j, (i, guard) in enumerate(self._guards):
-            verdict = guard.last_verdict
-            if verdict is not verdicts[j]:  # a check this tick
-                verdicts[j] = verdict
-                row["guard"], row["guard_ok"] = i, 1 if verdict.ok else 0
-                row["clearance"] = verdict.min_distance
-                row["com_margin"] = math.nan if verdict.com_margin is None else verdict.com_margin
+        for i, node in self._path_guards:  # a guard checks only when ticked: on the running path
+            verdict = cast(RiskGuard, node).last_verdict
+            if verdict is not verdicts[i]:  # it checked this tick
+                verdicts[i] = verdict
+                guard, ok, clearance = i, 1 if verdict.ok else 0, verdict.min_distance
+                com = math.nan if verdict.com_margin is None else verdict.com_margin
+        wall = time.perf_counter() - self._t0
+        head = _FIELDS.pack(tick, self._robot.time, wall, clearance, com, guard, ok)
         self._q[:] = self._qpos
-        self._frames.write(self._frame.tobytes())
+        self._frames.write(head + self._q.tobytes())
         self.frames += 1
 
     def close(self) -> None:
