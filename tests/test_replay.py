@@ -217,3 +217,21 @@ def test_missing_or_corrupt_records_are_exit_2(
     assert main(["replay", str(run["folder"]), "--video", str(blocker / "v.mp4")]) == 2
     assert "--video" in capsys.readouterr().err
     assert os.listdir(tmp_path / "copy") == ["record"]
+
+
+def test_a_sampled_truth_is_rebuilt_with_its_seed(tmp_path: Path) -> None:
+    """A run on a sampled truth replays in that truth: its obstacles and objects where the run had them."""
+    scenario = with_rollouts(load("book_transfer"), 0)
+    executive = Executive(scenario, approval="deny", truth=7, out=tmp_path / "run")
+    try:
+        assert executive.truth is not None
+        truth_model = executive.truth.model
+        record = load_record(tmp_path / "run")  # the header and the state before the first tick
+        assert record.header["truth"] == 7 and record.header["world"] == "truth"
+        world = rebuild_world(record)
+        assert np.array_equal(world.model.body_pos, truth_model.body_pos)
+        assert np.array_equal(world.model.body_mass, truth_model.body_mass)
+        assert not np.array_equal(world.model.body_pos, executive.estimate.model.body_pos)  # it was perturbed
+        assert np.max(np.abs(record.qpos[0] - world.data.qpos)) < 1e-6  # float32 of the same state
+    finally:
+        executive.stop("test over")
