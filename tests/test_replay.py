@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -212,6 +213,11 @@ def test_missing_or_corrupt_records_are_exit_2(
     assert "header.json: not a readable record header" in capsys.readouterr().err
     assert main(["replay", str(run["folder"]), "--video", str(tmp_path / "v.webp")]) == 2
     assert "unknown video type" in capsys.readouterr().err
+    with pytest.MonkeyPatch.context() as patch:  # as if imageio-ffmpeg were not installed
+        patch.setitem(sys.modules, "imageio_ffmpeg", None)
+        assert main(["replay", str(run["folder"]), "--video", str(tmp_path / "v.mp4")]) == 2
+    err = capsys.readouterr().err
+    assert 'pip install ".[video]"' in err and ".gif" in err and not (tmp_path / "v.mp4").exists()
     blocker = tmp_path / "a_file"
     blocker.write_text("")
     assert main(["replay", str(run["folder"]), "--video", str(blocker / "v.mp4")]) == 2
@@ -219,7 +225,7 @@ def test_missing_or_corrupt_records_are_exit_2(
     assert os.listdir(tmp_path / "copy") == ["record"]
 
 
-def test_a_sampled_truth_is_rebuilt_with_its_seed(tmp_path: Path) -> None:
+def test_a_sampled_truth_is_rebuilt_with_its_seed(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     """A run on a sampled truth replays in that truth: its obstacles and objects where the run had them."""
     scenario = with_rollouts(load("book_transfer"), 0)
     executive = Executive(scenario, approval="deny", truth=7, out=tmp_path / "run")
@@ -235,3 +241,5 @@ def test_a_sampled_truth_is_rebuilt_with_its_seed(tmp_path: Path) -> None:
         assert np.max(np.abs(record.qpos[0] - world.data.qpos)) < 1e-6  # float32 of the same state
     finally:
         executive.stop("test over")
+    assert main(["replay", str(tmp_path / "run")]) == 0  # a stopped run: its summary says how it ended
+    assert "the run was stopped, outcome aborted (test over)" in capsys.readouterr().out

@@ -21,16 +21,12 @@ __all__ = ["add_parser", "run"]
 def run(args: argparse.Namespace) -> int:
     """The command; 0 done (errors are raised as ExecutiveError: exit 2 in ``main``)."""
     from executive.execution.tick_record import load_record
-    from executive.report.replay import FFMPEG_SUFFIXES, phase_summary, rebuild_world, render_video
+    from executive.report.replay import encoder, phase_summary, rebuild_world, render_video
 
     video = None
     if args.video:
         video = check_file(args.video, "--video")
-        if video.suffix.lower() not in (*FFMPEG_SUFFIXES, ".gif"):
-            raise ExecutiveError(
-                f"--video {video}: unknown video type '{video.suffix}'; "
-                f"one of {', '.join(FFMPEG_SUFFIXES)}, .gif"
-            )
+        encoder(video)  # a known type, its encoder installed
         if video.suffix.lower() != ".gif" and (args.width % 2 or args.height % 2):
             raise ExecutiveError(f"--width {args.width} --height {args.height}: H.264 needs even sizes")
     record = load_record(args.run_dir)
@@ -68,7 +64,7 @@ def add_parser(
     p.add_argument(
         "--video",
         metavar="FILE",
-        help="render the run offscreen to FILE: .mp4 .mkv .webm .avi .mov (pip install '.[video]') or .gif",
+        help="render the run offscreen to FILE: .mp4 .mkv .avi .mov (pip install '.[video]') or .gif",
     )
     p.add_argument("--fps", type=_fps, default=25.0, help="video frames per second (default 25)")
     p.add_argument("--width", type=pixels, default=640, help="video width in pixels (default 640)")

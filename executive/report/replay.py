@@ -6,13 +6,14 @@
 exact run or a host's robot), and either prints :func:`phase_summary` or renders
 :func:`render_video`: each video frame is the recorded qpos of the last tick at or before its
 time, put into the rebuilt world (``mj_forward``) and drawn by ``mujoco.Renderer`` from the
-overview camera of ``executive show``. MP4 (and MKV, WebM, AVI, MOV) are encoded by
+overview camera of ``executive show``. MP4 (and MKV, AVI, MOV) are encoded as H.264 by
 imageio-ffmpeg (``pip install ".[video]"``: the wheel ships an ffmpeg binary); an animated GIF
 is written with Pillow and needs nothing more.
 """
 
 from __future__ import annotations
 
+import json
 import math
 import time
 from collections.abc import Callable, Iterator
@@ -34,6 +35,7 @@ from executive.world.model import World, build, sample_perturbation
 __all__ = [
     "FFMPEG_SUFFIXES",
     "StepSpan",
+    "encoder",
     "make_renderer",
     "phase_summary",
     "rebuild_world",
@@ -42,8 +44,8 @@ __all__ = [
     "video_frames",
 ]
 
-#: Containers written through imageio-ffmpeg (H.264 in all but WebM, which is VP9).
-FFMPEG_SUFFIXES = (".mp4", ".mkv", ".webm", ".avi", ".mov")
+#: Containers written through imageio-ffmpeg, all as H.264 (libx264).
+FFMPEG_SUFFIXES = (".mp4", ".mkv", ".avi", ".mov")
 _INSTALL = 'pip install ".[video]" (or: pip install imageio-ffmpeg)'
 
 
@@ -124,20 +126,18 @@ def video_frames(record: Record, fps: float) -> NDArray[np.int64]:
     return np.append(np.clip(frames, 0, len(record) - 1), len(record) - 1).astype(np.int64)
 
 
-@contextmanager
-def _writer(path: Path, size: tuple[int, int], fps: float) -> Iterator[Callable[[np.ndarray], None]]:
-    """A function taking RGB frames (height x width x 3) for ``path``; the file is closed after."""
+def encoder(path: Path) -> Any:
+    """The module that writes ``path``'s video type: imageio-ffmpeg, or None for a ``.gif`` (Pillow).
+
+    Raises:
+        ExecutiveError: an unknown video type, or imageio-ffmpeg not installed (with the pip command).
+    """
     suffix = path.suffix.lower()
     if suffix == ".gif":
-        from PIL import Image
-
-        images: list[Any] = []
-        yield lambda rgb: images.append(Image.fromarray(rgb))
-        images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0)
-        return
+        return None
     if suffix not in FFMPEG_SUFFIXES:
         raise ExecutiveError(
-            f"--video {path}: unknown video type '{suffix}'; one of {', '.join(FFMPEG_SUFFIXES)}, .gif"
+            f"--video {path}: unknown video type '{path.suffix}'; one of {', '.join(FFMPEG_SUFFIXES)}, .gif"
         )
     try:
         import imageio_ffmpeg
@@ -146,8 +146,23 @@ def _writer(path: Path, size: tuple[int, int], fps: float) -> Iterator[Callable[
             f"--video {path}: {suffix} is encoded by imageio-ffmpeg, which is not installed: {_INSTALL}; "
             "or write an animated .gif (Pillow)"
         ) from None
-    # Quality 8 of 10 (libx264 CRF about 18 at 8): a replay's frame differs from a direct render
-    # by about a grey level on average (docs/replay.md).
+    return imageio_ffmpeg
+
+
+@contextmanager
+def _writer(path: Path, size: tuple[int, int], fps: float) -> Iterator[Callable[[np.ndarray], None]]:
+    """A function taking RGB frames (height x width x 3) for ``path``; the file is closed after."""
+    suffix = path.suffix.lower()
+    if suffix == ".gif":
+        from PIL import Image
+
+        images: list[Any] = []  # each frame with its own 256 colours: a third of its RGB memory
+        yield lambda rgb: images.append(Image.fromarray(rgb).convert("P", palette=Image.Palette.ADAPTIVE))
+        images[0].save(path, save_all=True, append_images=images[1:], duration=int(1000 / fps), loop=0)
+        return
+    imageio_ffmpeg = encoder(path)
+    # Quality 8 of 10 is libx264's CRF 10: a replay's frame differs from a direct render by about
+    # a grey level on average (docs/replay.md).
     gen = imageio_ffmpeg.write_frames(
         str(path), size, fps=fps, quality=8, macro_block_size=1, ffmpeg_log_level="error"
     )
@@ -173,7 +188,7 @@ def render_video(
     Args:
         record: the record.
         world: :func:`rebuild_world`'s world (its ``data`` is overwritten).
-        path: ``.mp4``/``.mkv``/``.webm``/``.avi``/``.mov`` (imageio-ffmpeg) or ``.gif`` (Pillow).
+        path: ``.mp4``/``.mkv``/``.avi``/``.mov`` (imageio-ffmpeg, H.264) or ``.gif`` (Pillow).
         fps: video frames per second of robot time (the video plays in real time).
         width, height: pixels (even: H.264 needs even sizes).
         shadows: draw shadows and reflections (:func:`make_renderer`).
@@ -200,6 +215,8 @@ def render_video(
                 write(renderer.render())
     except OSError as exc:
         raise ExecutiveError(f"--video {path}: not written ({exc.strerror or exc})") from None
+    except RuntimeError as exc:  # ffmpeg stopped (imageio-ffmpeg reports its exit so)
+        raise ExecutiveError(f"--video {path}: ffmpeg failed: {exc}") from None
     finally:
         renderer.close()
     return len(frames), time.perf_counter() - t0
@@ -277,6 +294,20 @@ def _mm(value: float) -> str:
     return f"{value * 1000:8.1f}" if math.isfinite(value) else f"{'-':>8}"
 
 
+def _ending(record: Record) -> str:
+    """How the record ends: the mission's status, or where it stops (and the summary's outcome, if any)."""
+    end = next((e for e in record.events if e["k"] == "end"), None)
+    if end is not None:
+        return f"ended     {end['status']} at tick {end['tick']}"
+    text = f"ended     without its end at t={record.times[-1]:.2f} s: "
+    try:
+        summary = json.loads((record.folder.parent / "summary.json").read_text(encoding="utf-8"))
+        outcome = f"{summary['outcome']}" + (f" ({summary['reason']})" if summary.get("reason") else "")
+    except (OSError, ValueError, KeyError, TypeError):
+        return text + "the run was killed (no summary.json)"
+    return text + f"the run was stopped, outcome {outcome} (summary.json)"
+
+
 def phase_summary(record: Record) -> str:
     """A short text: the record, the tasks' phases with their times, each step's outcome and guard minima."""
     h = record.header
@@ -285,14 +316,12 @@ def phase_summary(record: Record) -> str:
     truth = {"exact": "exact (truth = estimate)", None: "the host's robot (estimate)"}.get(
         h.get("truth"), f"sampled, seed {h.get('truth')}"
     )
-    end = next((e for e in record.events if e["k"] == "end"), None)
     lines = [
         f"record    {record.folder}: {h['scenario']}, truth {truth}",
         f"          {len(record)} frames, ticks {record.ticks[0]}-{record.ticks[-1]}, "
-        f"{record.duration:.2f} s of robot time, {size / 1000:.0f} kB ({per_s / 1000:.1f} kB/s)",
-        f"ended     {end['status']} at tick {end['tick']}"
-        if end is not None
-        else f"ended     without its end: the run was killed or stopped at t={record.times[-1]:.2f} s",
+        f"{record.duration:.2f} s of robot time, {size / 1000:.0f} kB"
+        + (f" ({per_s / 1000:.1f} kB/s)" if math.isfinite(per_s) else ""),
+        _ending(record),
         "",
         f"{'phase / step':<40}{'from s':>8}{'to s':>8}{'dur s':>7}  {'status':<8}"
         f"{'min clear mm':>13}{'min CoM mm':>11}",
