@@ -2,12 +2,13 @@
 
 The subtrees are built from the task kinds' steps, without planning; they must be the very
 subtrees a run builds from the planned alternatives (checked node for node against
-``kind.subtree`` of real plans), and every alternative ``executive plan`` lists (the names
-``assess_task`` gives it) must appear with its step behaviours.
+``kind.subtree`` of real plans), and every alternative ``executive plan --json`` lists must
+appear with its step behaviours.
 """
 
 from __future__ import annotations
 
+import json
 import shutil
 from pathlib import Path
 
@@ -51,7 +52,10 @@ def planned() -> dict[str, py_trees.behaviour.Behaviour]:
 def test_every_planned_alternative_is_in_the_tree_with_its_steps(
     planned: dict[str, py_trees.behaviour.Behaviour], capsys: pytest.CaptureFixture[str]
 ) -> None:
-    assert set(planned) == {"left", "right", "left_to_right"}
+    assert main(["plan", "book_transfer", "--json", "--rollouts", "0"]) == 0
+    (task,) = json.loads(capsys.readouterr().out)["tasks"]
+    names = [alt["name"] for alt in task["alternatives"]]
+    assert names == list(planned) == ["left", "right", "left_to_right"]
     assert main(["tree", "book_transfer"]) == 0
     out = capsys.readouterr().out
     lines = out.splitlines()
