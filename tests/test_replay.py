@@ -208,6 +208,17 @@ def test_missing_or_corrupt_records_are_exit_2(
     assert main(["replay", str(copy.parent)]) == 2
     err = capsys.readouterr().err
     assert "events.jsonl: line 2" in err and "Traceback" not in err
+    (copy / "events.jsonl").write_text(
+        "\n".join([*lines[:3], '{"k":"status","frame":3,"s":[[0,7]]}', *lines[3:]])
+    )
+    assert main(["replay", str(copy.parent)]) == 2
+    assert (
+        "events.jsonl: line 4: status: s: expected [node index, status code 0-3]" in capsys.readouterr().err
+    )
+    header = json.loads((run["folder"] / "record" / "header.json").read_text())
+    (copy / "header.json").write_text(json.dumps({**header, "nq": "47"}))
+    assert main(["replay", str(copy.parent)]) == 2
+    assert "header.json: nq: unexpected value '47'" in capsys.readouterr().err
     (copy / "header.json").write_text("{")
     assert main(["replay", str(copy.parent)]) == 2
     assert "header.json: not a readable record header" in capsys.readouterr().err

@@ -44,6 +44,7 @@ import os
 import struct
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, BinaryIO, cast
@@ -462,7 +463,43 @@ def _read_header(folder: Path) -> dict[str, Any]:
     for key in ("nq", "objects", "frame_bytes", "scenario", "source", "world"):
         if key not in header:
             raise RecordError(f"{path}: {key}: missing")
+    checks: list[tuple[str, Callable[[Any], bool]]] = [  # in order: later ones rely on earlier ones
+        ("nq", lambda v: _whole(v) and v >= 1),
+        ("frame_bytes", _whole),
+        (
+            "objects",
+            lambda v: isinstance(v, dict) and all(_whole(a) and 0 <= a < header["nq"] for a in v.values()),
+        ),
+        ("world", lambda v: v in ("truth", "estimate")),
+        ("truth", lambda v: v in (None, "exact") or _whole(v)),
+    ]
+    for key, good in checks:
+        if not good(header.get(key)):
+            raise RecordError(f"{path}: {key}: unexpected value {header.get(key)!r}")
     return header
+
+
+def _whole(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _event_problem(event: Any) -> str | None:
+    """What is wrong with one parsed event line (None: nothing)."""
+    if not isinstance(event, dict) or not isinstance(event.get("k"), str) or not _whole(event.get("frame")):
+        return "not an event (an object with 'k' and a whole 'frame')"
+    if event["k"] == "tree":
+        nodes = event.get("nodes")
+        if not isinstance(nodes, list) or not all(
+            isinstance(n, list) and len(n) == 3 and _whole(n[2]) and -1 <= n[2] < len(nodes) for n in nodes
+        ):
+            return "tree: nodes: expected [name, class, parent index] lists"
+    if event["k"] == "status":
+        pairs = event.get("s")
+        if not isinstance(pairs, list) or not all(
+            isinstance(p, list) and len(p) == 2 and _whole(p[0]) and p[1] in STATUS_NAMES for p in pairs
+        ):
+            return "status: s: expected [node index, status code 0-3] pairs"
+    return None
 
 
 def _read_events(path: Path) -> list[dict[str, Any]]:
@@ -476,8 +513,9 @@ def _read_events(path: Path) -> list[dict[str, Any]]:
             continue
         try:
             event = json.loads(line)
-            if not isinstance(event, dict) or "k" not in event or "frame" not in event:
-                raise ValueError("not an event (an object with 'k' and 'frame')")
+            problem = _event_problem(event)
+            if problem is not None:
+                raise ValueError(problem)
         except ValueError as exc:
             if number == len(lines):  # no newline after it: cut by a kill
                 break
