@@ -254,3 +254,30 @@ def test_a_sampled_truth_is_rebuilt_with_its_seed(tmp_path: Path, capsys: pytest
         executive.stop("test over")
     assert main(["replay", str(tmp_path / "run")]) == 0  # a stopped run: its summary says how it ended
     assert "the run was stopped, outcome aborted (test over)" in capsys.readouterr().out
+
+
+def test_a_host_robot_run_records_what_the_host_reports(tmp_path: Path) -> None:
+    """With a host's robot the frames are its measured state in the estimate's layout; no truth to rebuild."""
+    from test_host_robot import SimulatedHardware
+
+    from executive.execution.robot_interface import HostRobot
+    from executive.world.model import build
+
+    scenario = with_rollouts(load("book_transfer"), 0)
+    hardware = SimulatedHardware(build(scenario), control_dt=0.02)
+    robot = HostRobot(build(scenario), hardware, control_dt=0.02)
+    executive = Executive(scenario, approval="deny", robot=robot, out=tmp_path / "run")
+    seen = []
+    try:
+        for _ in range(20):
+            robot.sync()
+            executive.tick()
+            seen.append(robot.data.qpos.copy())
+            hardware.servo.advance()
+    finally:
+        executive.stop("test over")
+    record = load_record(tmp_path / "run")
+    assert record.header["world"] == "estimate" and record.header["truth"] is None
+    assert len(record) == 21 and np.max(np.abs(record.qpos[1:] - np.array(seen))) < 1e-5
+    world = rebuild_world(record)
+    assert world.model.nq == record.header["nq"]
