@@ -250,6 +250,28 @@ def test_without_viser_the_console_options_exit_2_saying_what_to_install(
     assert not (tmp_path / "run" / "decisions.jsonl").exists()  # refused before the run started
     assert main(["console", "book_transfer"]) == 2
     assert 'pip install ".[console]"' in capsys.readouterr().err
+    assert main(["replay", str(tmp_path), "--console"]) == 2  # said before the record is looked for
+    assert 'pip install ".[console]"' in capsys.readouterr().err
+
+
+def test_the_recorded_tree_reads_as_py_trees_prints_it() -> None:
+    from executive.console.replay_view import tree_text
+    from executive.execution.tick_record import TreeNode
+
+    nodes = [TreeNode("mission", "Sequence", -1), TreeNode("task0", "RiskSelector", 0)]
+    nodes += [
+        TreeNode("left", "Sequence", 1),
+        TreeNode("left.grasp", "Grasp", 2),
+        TreeNode("right", "Sequence", 1),
+    ]
+    statuses = ["RUNNING", "RUNNING", "RUNNING", "SUCCESS", "INVALID"]
+    assert tree_text(list(zip(nodes, statuses, strict=True))).splitlines() == [
+        "mission [*]",
+        "    task0 [*]",
+        "        left [*]",
+        "            left.grasp [✓]",
+        "        right [-]",
+    ]
 
 
 def test_console_refuses_a_folder_without_a_run(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

@@ -75,7 +75,7 @@ class Ticking:
 
 
 @pytest.fixture
-def run(tmp_path: Path) -> Iterator[tuple[Any, Any, Path]]:
+def run(tmp_path: Path) -> Iterator[tuple[Any, Any, Path, Ticking]]:
     from executive.console.console import Console
     from executive.runtime.mission import Executive
 
@@ -90,7 +90,7 @@ def run(tmp_path: Path) -> Iterator[tuple[Any, Any, Path]]:
     console.attach(executive)
     ticking = Ticking(executive)
     try:
-        yield console, executive, folder
+        yield console, executive, folder, ticking
     finally:
         ticking.stop()
         console.close()
@@ -138,10 +138,38 @@ def _ghost_matches_plan(console: Any, name: str) -> float:
         return float(ghost.time)
 
 
-def test_approve_a_risky_alternative_from_the_page(run: tuple[Any, Any, Path]) -> None:
+def _replay(page: Any, folder: Path) -> None:
+    """``executive replay --console`` of the stopped run: its slider puts the recorded state on the page."""
+    from executive.console.console import Console
+    from executive.execution.tick_record import load_record
+
+    record = load_record(folder)
+    replay = Console(0, title="replay")
+    try:
+        replay.show_run(folder, replay=True)
+        page.goto(replay.url)
+        page.get_by_text("Replay (the run's per-tick record)").wait_for(timeout=30_000)
+        assert f"{len(record)} ticks" in page.locator("body").inner_text()
+        _scrub(page, "robot time", 0.8)  # the slider is labelled "robot time [s]"
+        view = replay.replay
+        assert view is not None
+        deadline = time.monotonic() + 10
+        while view.frame <= 0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        with view.lock:
+            frame = view.frame
+            np.testing.assert_array_equal(replay.view.qpos, record.qpos[frame])
+        t = record.times[frame]
+        assert t == pytest.approx(record.times[0] + 0.8 * record.duration, abs=0.05 * record.duration)
+        page.get_by_text(f"tick {int(record.ticks[frame])} ").first.wait_for(timeout=10_000)
+    finally:
+        replay.close()
+
+
+def test_approve_a_risky_alternative_from_the_page(run: tuple[Any, Any, Path, Ticking]) -> None:
     from playwright.sync_api import sync_playwright
 
-    console, executive, folder = run
+    console, executive, folder, ticking = run
     with sync_playwright() as pw:
         browser = pw.chromium.launch(
             executable_path=str(CHROMIUM), args=["--use-angle=swiftshader", "--enable-unsafe-swiftshader"]
@@ -195,5 +223,7 @@ def test_approve_a_risky_alternative_from_the_page(run: tuple[Any, Any, Path]) -
         page.get_by_text("[executing]").first.wait_for(timeout=10_000)
         # The behaviour tree, live: the approved alternative's subtree is running.
         page.get_by_text(f"{{-}} {request.recommended} [*]").first.wait_for(timeout=10_000)
+        ticking.stop()
+        _replay(page, folder)
         browser.close()
     print(f"page load (goto to the panel's first status line): {load_s:.2f} s")

@@ -1,10 +1,12 @@
-"""``executive replay RUN_DIR [--video FILE]``: a run played back from its per-tick record.
+"""``executive replay RUN_DIR [--video FILE] [--console]``: a run played back from its record.
 
 Reads a run folder's per-tick record (:mod:`executive.execution.tick_record`). Without
 ``--video`` it prints a summary per phase (:func:`executive.report.replay.phase_summary`);
 with it, it renders the recorded run offscreen into a video of the world it ran in
-(:func:`executive.report.replay.render_video`). A killed run replays up to its last whole
-tick. A missing or unreadable record, or a path that cannot be written: exit 2 naming it.
+(:func:`executive.report.replay.render_video`); with ``--console``, it serves the operator's
+page with a time slider over the record (:func:`executive.console.commands.serve_replay`). A
+killed run replays up to its last whole tick. A missing or unreadable record, or a path that
+cannot be written: exit 2 naming it.
 """
 
 from __future__ import annotations
@@ -23,6 +25,10 @@ def run(args: argparse.Namespace) -> int:
     from executive.execution.tick_record import load_record
     from executive.report.replay import encoder, phase_summary, rebuild_world, render_video
 
+    if args.console:
+        from executive.console.server import require_viser
+
+        require_viser()  # a missing extra fails before anything is read or rendered
     video = None
     if args.video:
         video = check_file(args.video, "--video")
@@ -32,14 +38,33 @@ def run(args: argparse.Namespace) -> int:
     record = load_record(args.run_dir)
     print(phase_summary(record))
     if video is None:
-        return 0
+        return _console(args)
     world = rebuild_world(record, args.scenario)
     frames, seconds = render_video(
         record, world, video, fps=args.fps, width=args.width, height=args.height, shadows=args.shadows
     )
     size = f"{args.width}x{args.height}"
     print(f"video     {video}: {frames} frames at {args.fps:g} fps, {size}, rendered in {seconds:.1f} s")
-    return 0
+    return _console(args)
+
+
+def _console(args: argparse.Namespace) -> int:
+    """``--console``: the record on the operator's page, until Ctrl-C (without it: 0 at once)."""
+    if not args.console:
+        return 0
+    from executive.console.commands import serve_replay
+
+    return serve_replay(args.run_dir, args.console_port, args.scenario)
+
+
+def _port(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a TCP port (a whole number), got {text!r}") from None
+    if not 0 <= value <= 65535:
+        raise argparse.ArgumentTypeError(f"must be from 0 to 65535 (0: any free port), got {value}")
+    return value
 
 
 def _fps(text: str) -> float:
@@ -73,4 +98,11 @@ def add_parser(
     p.add_argument(
         "--scenario", metavar="FILE", help="the run's scenario, if its file is not where the run read it"
     )
+    p.add_argument(
+        "--console",
+        action="store_true",
+        help="play it back on the operator's console (a page on 127.0.0.1 with a time slider; "
+        'pip install ".[console]")',
+    )
+    p.add_argument("--console-port", type=_port, default=8080, help="the console's port (default 8080)")
     p.set_defaults(func=run)

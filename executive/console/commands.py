@@ -24,7 +24,7 @@ from executive.decision.approval import ApprovalChannel, make_channel
 if TYPE_CHECKING:
     from executive.runtime.mission import Executive
 
-__all__ = ["RunConsole", "is_run_folder", "open_for_run", "serve"]
+__all__ = ["RunConsole", "is_run_folder", "open_for_run", "serve", "serve_replay"]
 
 
 def _announce(console: Console, what: str) -> None:
@@ -106,6 +106,24 @@ def serve(target: str, port: int) -> int:
     try:
         console.preview(scenario)
         _announce(console, f"{scenario.name} planned, nothing executed")
+        return _wait(console)
+    finally:
+        console.close()
+
+
+def serve_replay(run_dir: str, port: int, scenario: str | None = None) -> int:
+    """``executive replay RUN_DIR --console``: the run's record with a time slider, and its decisions,
+    until Ctrl-C.
+
+    Raises:
+        ConsoleError: viser is not installed, or the folder holds no run.
+        RecordError: the folder has no readable per-tick record, or its scenario cannot be rebuilt.
+    """
+    path = Path(run_dir)
+    console = Console(port, title=f"replay {path.name}")
+    try:
+        console.show_run(path, replay=True, scenario=scenario)
+        _announce(console, f"the record of {path}, with a time slider")
         return _wait(console)
     finally:
         console.close()

@@ -31,6 +31,7 @@ from executive.console.approval_panel import ApprovalPanel
 from executive.console.channel import ConsoleChannel
 from executive.console.ghost import GhostView, PlannedMotion
 from executive.console.live import LiveFeed
+from executive.console.replay_view import ReplayView
 from executive.console.run_log import read_decisions, task_decisions, timeline
 from executive.console.scene import WorldView, light
 from executive.console.server import HOST, start_server, stop_server
@@ -82,6 +83,7 @@ class Console:
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._shown: dict[str, int] = {}
+        self.replay: ReplayView | None = None
 
     @property
     def url(self) -> str:
@@ -227,16 +229,25 @@ class Console:
         finally:
             physics.close()
 
-    def show_run(self, folder: Path) -> None:
-        """Show the decisions logged in the run folder ``folder`` (and its scene as the scenario has it).
+    def show_run(self, folder: Path, *, replay: bool | None = None, scenario: str | None = None) -> None:
+        """Show the decisions logged in the run folder ``folder``, and its per-tick record with a
+        time slider when it has one (else its scene as the scenario starts).
+
+        Args:
+            folder: the run folder.
+            replay: True: the record is required (``executive replay --console``); None: shown
+                when present; False: not shown.
+            scenario: the run's scenario file, if not where the run read it.
 
         Raises:
             ConsoleError: ``folder`` holds no run.
+            RecordError: ``replay`` is True and the record is missing or unreadable.
         """
         entries = read_decisions(folder)
         run = next((e for e in entries if e.get("kind") == "run"), {})
         ordering, threshold = str(run.get("ordering", "expected_loss")), float(run.get("threshold", 0.0))
-        self._scene_of(run)
+        if not (replay is not False and self._replay(folder, scenario, required=bool(replay))):
+            self._scene_of(run)
         for key, decision in task_decisions(entries).items():
             labels = run.get("tasks") or []
             index = int(key[4:]) if key.startswith("task") and key[4:].isdigit() else -1
@@ -247,6 +258,27 @@ class Console:
         self.status.content = f"**{run.get('scenario', folder)}** · run folder `{folder}` · {ended}"
         with self.server.gui.add_folder("Decisions (decisions.jsonl)", order=500, expand_by_default=False):
             self.server.gui.add_markdown(timeline(entries))
+
+    def _replay(self, folder: Path, scenario: str | None, *, required: bool) -> bool:
+        """The record's replay section and the scene of its world; False when there is no record."""
+        from executive.errors import ExecutiveError
+        from executive.execution.tick_record import load_record
+        from executive.report.replay import rebuild_world
+
+        try:
+            record = load_record(folder)
+            world = rebuild_world(record, scenario)
+        except ExecutiveError as exc:
+            if required:
+                raise
+            self._error(exc)
+            return False
+        data = world.data
+        data.qpos[:] = record.qpos[0]
+        self._world(world.model, data, world)
+        assert self.view is not None
+        self.replay = ReplayView(self.server, record, self.view, self.tree, order=5)
+        return True
 
     def _scene_of(self, run: dict[str, Any]) -> None:
         """The run's scenario as it starts, when its file can still be loaded (else no scene)."""
