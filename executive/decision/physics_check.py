@@ -342,13 +342,13 @@ def _choice(
     return choice.confidence, choice.opportunity_cost
 
 
-def exit_with_parent(period_s: float = 0.2) -> threading.Thread:
-    """Start a thread that ends this process (``os._exit``) once its parent process is gone.
+def exit_with_parent(parent: int, period_s: float = 0.2) -> threading.Thread:
+    """Start a thread that ends this process (``os._exit``) once its parent ``parent`` is gone.
 
     A pool's worker waits on its task queue forever; when the process that owns the pool dies
-    without closing it (a planning worker killed mid-plan), nobody else would end it.
+    without closing it (a planning worker killed mid-plan), nobody else would end it. The parent
+    is given, not read here: it may have died while this process was still starting.
     """
-    parent = os.getppid()
 
     def watch() -> None:
         while os.getppid() == parent:
@@ -360,12 +360,12 @@ def exit_with_parent(period_s: float = 0.2) -> threading.Thread:
     return thread
 
 
-def _init_worker() -> None:
+def _init_worker(owner: int) -> None:
     os.environ.setdefault("MUJOCO_GL", "egl")
     # Ctrl-C on a terminal reaches the whole foreground process group: the process that owns
     # the pool handles it and shuts the workers down; a worker must not die printing a traceback.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
-    exit_with_parent()
+    exit_with_parent(owner)
 
 
 def _warm_up() -> None:
@@ -378,6 +378,7 @@ class RolloutPool:
     The processes are spawned (clean: no inherited MuJoCo or GL state, no threads) on
     :meth:`start` or the first call, and kept until :meth:`close`. A worker that dies takes
     the pool down with a :class:`RolloutError` (never a hang); the next call starts a new one.
+    The workers end by themselves when the process that owns the pool dies (:func:`exit_with_parent`).
     """
 
     def __init__(self, jobs: int) -> None:
@@ -391,7 +392,7 @@ class RolloutPool:
         if self._pool is None:
             ctx = multiprocessing.get_context("spawn")
             self._pool = concurrent.futures.ProcessPoolExecutor(
-                self.jobs, mp_context=ctx, initializer=_init_worker
+                self.jobs, mp_context=ctx, initializer=_init_worker, initargs=(os.getpid(),)
             )
         return self._pool
 

@@ -223,13 +223,14 @@ class Planning:
     @classmethod
     def of_scenario(cls, scenario: Scenario, jobs: int) -> Planning:
         """Everything built once for ``scenario``: its estimate world, a live risk monitor on it,
-        and a physics check whose ``jobs`` worker processes are started now."""
+        and a physics check whose ``jobs`` worker processes are started now (0: no physics check)."""
         from executive.monitoring.live_risk import LiveRiskMonitor
         from executive.world.model import build
 
         estimate = build(scenario)
-        physics = PhysicsCheck(jobs)
-        physics.pool.warm()
+        physics = PhysicsCheck(jobs) if jobs > 0 else None
+        if physics is not None:
+            physics.pool.warm()  # the rollout processes start while the first plans are made
         return cls(estimate, physics, LiveRiskMonitor(estimate, scenario.risk.guard))
 
     def tools(self, selector: str) -> tuple[Planner, CollisionModel]:

@@ -21,6 +21,12 @@ Faults are noticed by the process that ticks, on its next :meth:`~PlanningWorker
   monotonic clock) every :data:`BEAT_S`; a heartbeat older than :data:`HANG_S` is a hang. The
   thread is not the job: a plan that takes long (a G1's several seconds) keeps beating. Before
   the worker's first heartbeat (it is importing) the limit is :data:`START_S`.
+  The heartbeat thread needs the interpreter lock, which the job's thread holds while it
+  computes; on a loaded machine the scheduler may leave that thread without a core for most
+  of a second while it holds the lock (seen: 0.8 s at a load of 6 on 2 cores, the worker
+  niced), and no beat is written. So a stale heartbeat is a hang only if the process is
+  stopped or has used no CPU time meanwhile (Linux's ``/proc/<pid>/stat``; elsewhere the
+  heartbeat alone decides). A job stuck in an endless loop still beats: it is not a hang.
 
 ``poll`` then raises :class:`WorkerLost` (its reason says which); :meth:`~PlanningWorker.replace`
 kills the old process (a hung one too) and starts a fresh one, and the job is submitted again.
@@ -57,6 +63,8 @@ HANG_S = 0.75
 START_S = 120.0
 #: The worker's niceness (added to the ticking process's): the ticks get the cores first.
 NICE = 10
+#: How often (s) a busy worker's CPU time is read while its heartbeat is fresh.
+_SAMPLE_S = 0.2
 
 
 class WorkerLost(ExecutiveError):
@@ -124,6 +132,9 @@ class _Instance:
     inbox: dict[int, PlanningResult] = field(default_factory=dict)
     pending: set[int] = field(default_factory=set)  # tickets sent and neither answered nor forgotten
     ready: bool = False
+    cpu: int = -1  # the process's CPU time (clock ticks) when last read
+    sampled: float = 0.0  # when it was last read (time.monotonic)
+    computed: float = 0.0  # when it was first seen to have used CPU time since the read before
 
     def receive(self) -> None:
         """The receiving thread: results into the inbox until the worker's end of the pipe closes."""
@@ -150,9 +161,28 @@ class _Instance:
             if now - self.started > START_S:
                 return f"did not start: no heartbeat {now - self.started:.0f} s after it was spawned"
             return None
-        if now - beat > hang_s:
-            return f"hangs: no heartbeat for {now - beat:.2f} s (limit {hang_s:g} s)"
+        stale = now - beat > hang_s
+        if stale or now - self.sampled > _SAMPLE_S:
+            state, cpu = _cpu(self.process.pid)
+            self.sampled = now
+            if cpu != self.cpu:  # it computes (its heartbeat may be waiting for the interpreter lock)
+                self.cpu, self.computed = cpu, now
+            if stale and state in ("T", "t"):
+                return f"hangs: stopped (no heartbeat for {now - beat:.2f} s)"
+        if stale and now - max(beat, self.computed) > hang_s:
+            return f"hangs: no heartbeat and no CPU time for {now - beat:.2f} s (limit {hang_s:g} s)"
         return None
+
+
+def _cpu(pid: int | None) -> tuple[str, int]:
+    """The state letter and CPU time (user + system, clock ticks) of process ``pid`` from
+    ``/proc/<pid>/stat`` (proc(5)); ``("", -1)`` where it cannot be read."""
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            fields = f.read().rsplit(b")", 1)[1].split()
+    except (OSError, IndexError):
+        return "", -1
+    return fields[0].decode(), int(fields[11]) + int(fields[12])  # fields 3, 14 and 15 of the line
 
 
 class _Processes:

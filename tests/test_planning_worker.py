@@ -1,0 +1,196 @@
+"""The planning worker process (executive/decision/planning_worker.py): the selector's heavy work
+off the ticking process, a worker that dies or hangs noticed, logged and replaced.
+
+Real parts throughout: the worker is a spawned process that plans with mink, assesses with coal
+and dry-runs in MuJoCo; it is killed with SIGKILL and stopped with SIGSTOP as an operating
+system would; the mission's outcome is read from the truth world.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import struct
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pytest
+
+from executive.decision.physics_check import with_rollouts
+from executive.decision.planning_job import EstimateState, Planning, PlanningJob, PlanningResult, ranked
+from executive.decision.planning_worker import BEAT_S, HANG_S, PlanningWorker, WorkerLost
+from executive.monitoring.live_risk import LiveRiskMonitor
+from executive.runtime.mission import Executive
+from executive.scenario import load
+from executive.world.model import build
+
+TARGET = (0.52, -0.26)  # book_transfer's target (x, y), m
+
+
+def _bits(value: Any) -> Any:
+    """``value`` as nested tuples of bytes: equal exactly when every number is equal bit for bit."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return (
+            type(value).__name__,
+            tuple((f.name, _bits(getattr(value, f.name))) for f in dataclasses.fields(value)),
+        )
+    if isinstance(value, dict):
+        return ("dict", tuple(sorted((repr(k), _bits(v)) for k, v in value.items())))
+    if isinstance(value, set | frozenset):  # iteration order follows the process's string hashing
+        return ("set", tuple(sorted(repr(_bits(v)) for v in value)))
+    if isinstance(value, list | tuple):
+        return ("seq", tuple(_bits(v) for v in value))
+    if isinstance(value, np.ndarray):
+        return ("nd", value.dtype.str, value.shape, np.ascontiguousarray(value).tobytes())
+    if isinstance(value, float | np.floating):
+        return ("f", struct.pack("<d", float(value)))
+    return ("v", repr(value))
+
+
+def _untimed(result: PlanningResult) -> list[Any]:
+    """The alternatives of ``result`` without their wall times (which differ run to run)."""
+    return [dataclasses.replace(a, plan_s=0.0, assess_s=0.0) for a in result.results]
+
+
+def _job(world: Any, physics: bool) -> PlanningJob:
+    task = world.scenario.mission[0]
+    return PlanningJob("task0", task, np.array(world.data.qpos), EstimateState.of(world), physics=physics)
+
+
+def test_the_worker_plans_what_this_process_plans_bit_for_bit() -> None:
+    """book_transfer planned and assessed in the worker and here: the same choice, the same plans
+    and risk numbers to the last bit, the same guard distances of the chosen alternative."""
+    scenario = load("book_transfer")
+    worker = PlanningWorker(scenario, jobs=0)
+    try:
+        world = build(scenario)
+        job = _job(world, physics=False)
+        ticket = worker.submit(job)  # the worker plans while this process does
+        here = Planning(world, None, LiveRiskMonitor(world, scenario.risk.guard)).run(job)
+        there = None
+        deadline = time.monotonic() + 120.0
+        while there is None and time.monotonic() < deadline:
+            there = worker.poll(ticket)
+            time.sleep(0.01)
+    finally:
+        worker.close()
+    assert there is not None and here.failure is None and there.failure is None
+    assert there.pid != os.getpid() and here.pid == os.getpid()
+    ordering = scenario.risk.ordering
+    chosen = [a.name for a in ranked(here.results, ordering)]
+    print(f"ranking {chosen}; here {here.work_s:.2f} s, worker {there.work_s:.2f} s")
+    assert [a.name for a in ranked(there.results, ordering)] == chosen and len(chosen) == 3
+    for a, b in zip(_untimed(here), _untimed(there), strict=True):
+        assert _bits(a) == _bits(b), a.name
+    assert len(here.knots) == len(there.knots) > 0
+    assert _bits(list(here.knots)) == _bits(list(there.knots))
+
+
+def test_a_stopped_worker_is_noticed_within_a_second_and_a_long_job_is_not() -> None:
+    """SIGSTOP (a hang: its heartbeat stops) is noticed within HANG_S plus a poll; the fresh worker
+    then does the same job, longer than HANG_S (dry runs in physics), without being taken for hung."""
+    scenario = with_rollouts(load("book_transfer"), 0)
+    worker = PlanningWorker(scenario, jobs=1)
+    try:
+        assert worker.wait_ready(120.0)
+        job = _job(build(scenario), physics=True)
+        ticket = worker.submit(job)
+        time.sleep(0.3)
+        hung = worker.pid
+        assert hung is not None
+        os.kill(hung, signal.SIGSTOP)
+        stopped = time.monotonic()
+        with pytest.raises(WorkerLost) as lost:
+            while worker.poll(ticket) is None:
+                time.sleep(0.01)
+        noticed = time.monotonic() - stopped
+        print(f"noticed after {noticed:.2f} s: {lost.value}")
+        assert "hangs: stopped" in lost.value.reason and lost.value.pid == hung
+        assert HANG_S - BEAT_S <= noticed < 1.0  # its last beat came up to BEAT_S before the stop
+        fresh = worker.replace()
+        assert fresh != hung
+        ticket = worker.submit(job)
+        result = None
+        while result is None:
+            result = worker.poll(ticket)  # raises WorkerLost if the long job were taken for a hang
+            time.sleep(0.01)
+    finally:
+        worker.close()
+    print(f"the fresh worker's job took {result.work_s:.2f} s")
+    assert result.failure is None and result.pid == fresh and result.verdict is not None
+    assert result.work_s > HANG_S
+    assert _gone(hung)
+
+
+def _gone(pid: int, within_s: float = 5.0) -> bool:
+    """Whether process ``pid`` has ended (or is a zombie) within ``within_s``."""
+    deadline = time.monotonic() + within_s
+    while time.monotonic() < deadline:
+        try:
+            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except (FileNotFoundError, ProcessLookupError):
+            return True
+        if state in ("Z", "X"):
+            return True
+        time.sleep(0.05)
+    return False
+
+
+def _children(pid: int) -> list[int]:
+    """The child processes of ``pid`` (Linux /proc; empty where the kernel does not list them)."""
+    out: list[int] = []
+    for path in Path(f"/proc/{pid}/task").glob("*/children"):
+        out += [int(c) for c in path.read_text().split()]
+    return out
+
+
+def test_a_worker_killed_mid_plan_is_logged_and_replaced_and_the_mission_completes() -> None:
+    """SIGKILL to the planning worker while it plans: the executive logs it at the next tick, starts a
+    fresh worker, re-plans from where the robot holds and places the book (exact truth)."""
+    scenario = with_rollouts(load("book_transfer"), 0)  # dry runs only: the test's time
+    executive = Executive(scenario, approval="auto", truth="exact")
+    worker = executive.planning
+    assert worker is not None and worker.wait_ready(120.0)
+    selector = executive.selectors[0]
+    seen: dict[str, Any] = {}
+
+    def killer(ex: Executive) -> None:
+        planning = selector.phase == "planning" and len(ex.log.of_kind("planning")) == 1
+        if "killed" not in seen and planning:
+            seen.setdefault("planning_since", time.monotonic())
+            if time.monotonic() - seen["planning_since"] > 0.3:  # well inside the plan (about 1 s)
+                seen["pid"], seen["rollout_pids"] = worker.pid, _children(worker.pid or 0)
+                os.kill(seen["pid"], signal.SIGKILL)
+                seen["killed"] = time.monotonic()
+        if "killed" in seen and "noticed" not in seen and ex.log.of_kind("planning_worker"):
+            seen["noticed"] = time.monotonic()
+
+    executive.tick_listeners.append(killer)
+    held: list[np.ndarray] = []  # the robot's joints from the kill until the re-planned alternative starts
+    while not executive.done:
+        executive.tick()
+        if "killed" in seen and not executive.log.of_kind("execute"):
+            held.append(np.array(executive.robot.data.qpos[7:]))
+    summary = executive.summary()
+    lost = executive.log.of_kind("planning_worker")
+    print(lost, f"noticed {seen['noticed'] - seen['killed']:.3f} s after the kill")
+    assert len(lost) == 1 and lost[0]["pid"] == seen["pid"] and "SIGKILL" in lost[0]["reason"]
+    assert lost[0]["replacement"] not in (None, seen["pid"]) and lost[0]["action"] == "replaced"
+    assert seen["noticed"] - seen["killed"] < 1.0
+    sway = float(np.abs(np.array(held) - held[0]).max())
+    print(f"{len(held)} ticks from the kill to the re-planned start; joints within {sway:.2e} rad")
+    assert sway < 0.01  # the robot held
+    kinds = [e["kind"] for e in executive.log.entries]
+    after = kinds[kinds.index("planning_worker") :]
+    assert after[:2] == ["planning_worker", "planning"] and "execute" in after  # re-planned, then ran
+    assert kinds.count("planning") == 2 and kinds.count("execute") == 1
+    assert summary["outcome"] == "success", summary
+    assert executive.truth is not None
+    pos, _ = executive.truth.object_pose("book")
+    error = float(np.hypot(pos[0] - TARGET[0], pos[1] - TARGET[1]))
+    print(f"book {error * 1000:.1f} mm from the target; old rollout processes {seen['rollout_pids']}")
+    assert error < 0.02
+    assert all(_gone(pid) for pid in seen["rollout_pids"])  # no orphan left behind
