@@ -133,3 +133,15 @@ def test_bad_input_is_exit_2_naming_it(tmp_path: Path, capsys: pytest.CaptureFix
     assert main(["tree", "book_transfer", "--dot", str(blocker / "tree.dot")]) == 2
     err = capsys.readouterr().err
     assert "--dot" in err and "a file, not a folder" in err
+
+
+def test_a_place_after_a_pick_shows_each_hand_the_pick_may_leave_holding() -> None:
+    """pick_place_push's place (task1) needs the object in hand: laid out from what the pick's steps leave."""
+    tree = mission_tree(load("pick_place_push"))
+    assert tree.notes == []
+    tasks = {s.name: s for s in tree.root.children}
+    assert [c.name for c in tasks["task0"].children] == ["left", "right"]  # the pick
+    place = {c.name: [n.name for n in c.iterate()] for c in tasks["task1"].children}
+    assert set(place) == {"left", "right"}
+    for side, names in place.items():
+        assert f"{side}.place" in names and f"{side}.release" in names and f"{side}.grasp" not in names

@@ -30,7 +30,11 @@ def run(args: argparse.Namespace) -> int:
     print(text(tree.root, unicode=not args.ascii), end="")
     for note in tree.notes:
         print(f"note      {note}")
-    print("(alternatives in the task's order; a run ranks them by risk and drops the infeasible)")
+    print(
+        "(alternatives in the task's order: a run ranks them by risk and drops the infeasible; "
+        "tasks after the first are laid out with the hands holding what the earlier tasks' steps leave "
+        "in them, the objects where the scene starts them)"
+    )
     if dot is not None:
         try:
             dot.parent.mkdir(parents=True, exist_ok=True)

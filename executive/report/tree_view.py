@@ -12,6 +12,13 @@ subtree cannot be built that way is planned for real (the whole-body planner, no
 and said so in :attr:`MissionTree.notes`. The alternatives are in the task's order; a run
 puts them in its risk ranking's order and leaves out those it found infeasible.
 
+A task after the first starts, in a run, from what the earlier ones left: its alternatives are
+laid out here with the hands holding what the earlier tasks' steps leave in them (a ``place``
+after a ``pick``: each hand the pick's alternatives may leave holding the object), but with the
+objects where the scene starts them. A kind whose steps depend on where an earlier task left
+an object (the carry lane of a place, the strokes of a push) can then show a step more or less
+than the run will (docs/replay.md).
+
 Display it with py_trees' own renderers: :func:`text` (``py_trees.display.unicode_tree`` or
 ``ascii_tree``), :func:`dot_source` (``py_trees.display.dot_tree``, pydot) and
 :func:`write_svg` (Graphviz's ``dot`` program).
@@ -19,7 +26,9 @@ Display it with py_trees' own renderers: :func:`text` (``py_trees.display.unicod
 
 from __future__ import annotations
 
+import contextlib
 import shutil
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -77,18 +86,86 @@ def _stand_in(step: Step, world: World) -> Trajectory:
 
 def _subtree(
     kind: TaskKind, selector: RiskSelector, name: str, world: World, guard: bool, planner: list[Planner]
-) -> tuple[py_trees.behaviour.Behaviour, bool]:
+) -> tuple[py_trees.behaviour.Behaviour, bool, list[Step]]:
     """One alternative's subtree, from its steps (False) or, if that fails, from a real plan (True)."""
     task = selector.task
     steps = kind.steps(task, world, name, CompositionConfig())
     trajectories = {s.name: _stand_in(s, world) for s in steps if s.targets}
     try:
-        return kind.subtree(AlternativePlan(name, task, tuple(steps), trajectories), guard=guard), False
+        plan = AlternativePlan(name, task, tuple(steps), trajectories)
+        return kind.subtree(plan, guard=guard), False, steps
     except Exception:  # a kind whose subtree reads its trajectories: plan it for real
         if not planner:
             planner.append(Planner(world))
         plan = plan_alternative(planner[0], world, task, name)
-        return kind.subtree(plan, guard=guard), True
+        return kind.subtree(plan, guard=guard), True, list(plan.steps)
+
+
+def _held_after(held: dict[str, str], steps: list[Step]) -> dict[str, str]:
+    """What the hands hold (object -> side) after ``steps``, starting from ``held``."""
+    out = dict(held)
+    for step in steps:
+        if step.kind == "grasp":
+            out[step.obj] = step.side
+        elif step.kind == "release" and out.get(step.obj) == step.side:
+            del out[step.obj]
+    return out
+
+
+@contextlib.contextmanager
+def _holding(world: World, held: dict[str, str]) -> Iterator[None]:
+    """The estimate with its hands holding ``held`` (object -> side) for a while."""
+    saved = world.held
+    world.held = dict(held)
+    try:
+        yield
+    finally:
+        world.held = saved
+
+
+def _expand(
+    out: MissionTree,
+    selector: RiskSelector,
+    world: World,
+    states: list[dict[str, str]],
+    guard: bool,
+    planner: list[Planner],
+) -> list[dict[str, str]]:
+    """Give ``selector`` the subtree of every alternative that can be laid out in one of ``states``.
+
+    Returns the hold states its alternatives leave (the next task's starting states).
+    """
+    built: dict[str, py_trees.behaviour.Behaviour] = {}
+    why: dict[str, str] = {}
+    after: list[dict[str, str]] = []
+    for held in states:
+        with _holding(world, held):
+            for alt in selector.kind.alternatives(selector.task, world):
+                if alt.name in built:
+                    continue
+                if alt.unsupported:
+                    why.setdefault(alt.name, alt.unsupported)
+                    continue
+                try:
+                    subtree, planned, steps = _subtree(
+                        selector.kind, selector, alt.name, world, guard, planner
+                    )
+                except PlanningError as exc:
+                    why.setdefault(alt.name, str(exc))
+                    continue
+                built[alt.name] = subtree
+                if planned:
+                    out.planned.append(f"{selector.name}/{alt.name}")
+                    out.notes.append(f"{selector.name}/{alt.name}: subtree built from a real plan")
+                end = _held_after(held, steps)
+                if end not in after:
+                    after.append(end)
+    for name in selector.names:  # the task's order
+        if name in built:
+            selector.add_child(built[name])
+        else:
+            out.notes.append(f"{selector.name}/{name}: not in the tree: {why.get(name, 'not offered')}")
+    return after or states
 
 
 def mission_tree(scenario: Scenario, *, guard: bool = True, world: World | None = None) -> MissionTree:
@@ -123,21 +200,9 @@ def mission_tree(scenario: Scenario, *, guard: bool = True, world: World | None 
     root = py_trees.composites.Sequence(name=scenario.name, memory=True, children=list(selectors))
     out = MissionTree(root)
     planner: list[Planner] = []
+    states = [dict(world.held)]  # what the hands hold when each task starts, as far as steps tell
     for selector in selectors:
-        for alt in selector.kind.alternatives(selector.task, world):
-            where = f"{selector.name}/{alt.name}"
-            if alt.unsupported:
-                out.notes.append(f"{where}: not in the tree: {alt.unsupported}")
-                continue
-            try:
-                subtree, planned = _subtree(selector.kind, selector, alt.name, world, guard, planner)
-            except PlanningError as exc:
-                out.notes.append(f"{where}: not in the tree: {exc}")
-                continue
-            selector.add_child(subtree)
-            if planned:
-                out.planned.append(where)
-                out.notes.append(f"{where}: subtree built from a real plan (its kind reads the trajectories)")
+        states = _expand(out, selector, world, states, guard, planner)
     return out
 
 
