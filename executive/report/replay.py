@@ -308,6 +308,19 @@ def _ending(record: Record) -> str:
     return text + f"the run was stopped, outcome {outcome} (summary.json)"
 
 
+def _phase_spans(record: Record) -> list[tuple[dict[str, Any], int, int]]:
+    """Each phase a task was in (not ``idle`` or ``done``), its first frame and the frame it ended."""
+    phases = record.phases
+    out = []
+    for n, phase in enumerate(phases):
+        if phase["phase"] in ("idle", "done"):
+            continue
+        later = (p for p in phases[n + 1 :] if p["task"] == phase["task"])
+        end = next(later, None)
+        out.append((phase, int(phase["frame"]), int(end["frame"]) if end else len(record) - 1))
+    return out
+
+
 def phase_summary(record: Record) -> str:
     """A short text: the record, the tasks' phases with their times, each step's outcome and guard minima."""
     h = record.header
@@ -326,19 +339,15 @@ def phase_summary(record: Record) -> str:
         f"{'phase / step':<40}{'from s':>8}{'to s':>8}{'dur s':>7}  {'status':<8}"
         f"{'min clear mm':>13}{'min CoM mm':>11}",
     ]
-    phases = record.phases
-    for n, phase in enumerate(phases):
-        a = int(phase["frame"])
-        b = int(phases[n + 1]["frame"]) if n + 1 < len(phases) else len(record) - 1
-        if phase["phase"] in ("idle", "done") and a == b:
-            continue
+    spans = step_spans(record)
+    for phase, a, b in _phase_spans(record):
         label = f"{phase['task']} {phase['phase']}" + (
             f" {phase['alternative']}" if phase.get("alternative") else ""
         )
         t0, t1 = record.times[a], record.times[b]
         lines.append(f"{label:<40}{t0:>8.2f}{t1:>8.2f}{t1 - t0:>7.2f}")
         if phase["phase"] == "executing":
-            for span in step_spans(record):
+            for span in spans:
                 if span.task == phase["task"] and a <= span.start <= b:
                     s0, s1 = record.times[span.start], record.times[span.end]
                     lines.append(
