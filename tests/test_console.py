@@ -17,6 +17,7 @@ from types import SimpleNamespace
 
 import mujoco
 import numpy as np
+import py_trees
 import pytest
 
 from executive.cli.main import main
@@ -219,7 +220,8 @@ def test_the_console_channel_answers_as_console_user_and_first_answer_wins() -> 
 
 def test_the_feed_takes_at_most_its_rate_and_the_pacer_keeps_to_the_clock() -> None:
     data = mujoco.MjData(build(load("book_transfer")).model)
-    executive = SimpleNamespace(robot=SimpleNamespace(data=data, time=0.0), ticks=0, done=False)
+    running = py_trees.common.Status.RUNNING
+    executive = SimpleNamespace(robot=SimpleNamespace(data=data, time=0.0), ticks=0, status=running)
     feed = LiveFeed(rate_hz=20.0)
     t0 = time.perf_counter()
     while time.perf_counter() - t0 < 0.5:
@@ -230,8 +232,8 @@ def test_the_feed_takes_at_most_its_rate_and_the_pacer_keeps_to_the_clock() -> N
     assert executive.ticks > 1000 and 1 <= feed.taken <= elapsed * 20 + 1
     snap = feed.take(0.0)
     assert snap is not None and snap.qpos[0] <= executive.ticks and snap.qpos is not data.qpos
-    executive.done = True
-    feed(executive)  # the last tick is always taken
+    executive.status = py_trees.common.Status.SUCCESS
+    feed(executive)  # the mission's last tick is always taken
     assert feed.take(0.0).done  # type: ignore[union-attr]
     pacer = RealTimePacer()
     start = time.perf_counter()

@@ -46,7 +46,7 @@ if TYPE_CHECKING:
 
 __all__ = ["Console"]
 
-TREE_PERIOD_S = 0.5
+TEXT_PERIOD_S = 0.5  # s between redraws of the status line and the tree
 CAMERA_OFFSET = np.array([1.6, 1.0, 1.1])  # m from the point looked at
 IDLE_WAIT_S = 0.25
 
@@ -139,7 +139,7 @@ class Console:
     # --- the console's thread -------------------------------------------------------------
 
     def _follow(self, executive: Executive) -> None:
-        next_tree = 0.0
+        next_text = 0.0
         while not self._stop.is_set():
             snap = self.feed.take(IDLE_WAIT_S)
             try:
@@ -148,10 +148,10 @@ class Console:
                 self._decisions(executive)
                 self.approval.refresh()
                 now = time.perf_counter()
-                if now >= next_tree:
-                    next_tree = now + TREE_PERIOD_S
+                if now >= next_text or executive.done:  # the words change less often than the pose
+                    next_text = now + TEXT_PERIOD_S
                     self._tree(executive.root)
-                self._status(executive)
+                    self._status(executive)
             except Exception as exc:  # a drawing error must not stop the run; it is shown instead
                 self._error(exc)
 

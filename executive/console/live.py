@@ -19,14 +19,18 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import py_trees
 from numpy.typing import NDArray
 
 __all__ = ["LiveFeed", "RealTimePacer", "Snapshot"]
 
+RUNNING = py_trees.common.Status.RUNNING
+
 
 @dataclass(frozen=True)
 class Snapshot:
-    """The robot's state at one tick: its full ``qpos`` (a copy), robot time, tick count, done."""
+    """The robot's state at one tick: its full ``qpos`` (a copy), robot time, tick count, whether it
+    was the mission's last tick."""
 
     qpos: NDArray[np.float64]
     time: float
@@ -53,7 +57,7 @@ class LiveFeed:
 
     def __call__(self, executive: Any) -> None:
         now = time.perf_counter()
-        if now < self._next and not executive.done:
+        if now < self._next and executive.status == RUNNING:  # the mission's last tick is always taken
             return
         self._next = now + self.period
         robot = executive.robot
@@ -61,7 +65,7 @@ class LiveFeed:
             np.array(robot.data.qpos, dtype=float),
             float(robot.time),
             int(executive.ticks),
-            bool(executive.done),
+            executive.status != RUNNING,
             now,
         )
         self.taken += 1
