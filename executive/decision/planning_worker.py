@@ -25,8 +25,9 @@ Faults are noticed by the process that ticks, on its next :meth:`~PlanningWorker
   computes; on a loaded machine the scheduler may leave that thread without a core for most
   of a second while it holds the lock (seen: 0.8 s at a load of 6 on 2 cores, the worker
   niced), and no beat is written. So a stale heartbeat is a hang only if the process is
-  stopped or has used no CPU time meanwhile (Linux's ``/proc/<pid>/stat``; elsewhere the
-  heartbeat alone decides). A job stuck in an endless loop still beats: it is not a hang.
+  stopped, or has used no CPU time meanwhile and none of its threads waits for a core
+  (Linux's ``/proc/<pid>/task/*/stat``; elsewhere the heartbeat alone decides). A job stuck
+  in an endless loop still beats: it is not a hang.
 
 ``poll`` then raises :class:`WorkerLost` (its reason says which); :meth:`~PlanningWorker.replace`
 kills the old process (a hung one too) and starts a fresh one, and the job is submitted again.
@@ -163,26 +164,35 @@ class _Instance:
             return None
         stale = now - beat > hang_s
         if stale or now - self.sampled > _SAMPLE_S:
-            state, cpu = _cpu(self.process.pid)
+            states, cpu = _threads(self.process.pid)
             self.sampled = now
-            if cpu != self.cpu:  # it computes (its heartbeat may be waiting for the interpreter lock)
+            if cpu != self.cpu or "R" in states:  # it computes, or a thread waits for a core
                 self.cpu, self.computed = cpu, now
-            if stale and state in ("T", "t"):
+            if stale and states & {"T", "t"}:
                 return f"hangs: stopped (no heartbeat for {now - beat:.2f} s)"
         if stale and now - max(beat, self.computed) > hang_s:
             return f"hangs: no heartbeat and no CPU time for {now - beat:.2f} s (limit {hang_s:g} s)"
         return None
 
 
-def _cpu(pid: int | None) -> tuple[str, int]:
-    """The state letter and CPU time (user + system, clock ticks) of process ``pid`` from
-    ``/proc/<pid>/stat`` (proc(5)); ``("", -1)`` where it cannot be read."""
+def _threads(pid: int | None) -> tuple[set[str], int]:
+    """The state letters of process ``pid``'s threads and its CPU time (user + system, clock
+    ticks), from Linux's ``/proc/<pid>/task/*/stat`` and ``/proc/<pid>/stat`` (proc(5));
+    ``(set(), -1)`` where they cannot be read."""
+    states: set[str] = set()
     try:
-        with open(f"/proc/{pid}/stat", "rb") as f:
-            fields = f.read().rsplit(b")", 1)[1].split()
+        for task in os.listdir(f"/proc/{pid}/task"):
+            states.add(_stat(f"/proc/{pid}/task/{task}/stat")[0].decode())
+        fields = _stat(f"/proc/{pid}/stat")
     except (OSError, IndexError):
-        return "", -1
-    return fields[0].decode(), int(fields[11]) + int(fields[12])  # fields 3, 14 and 15 of the line
+        return set(), -1
+    return states, int(fields[11]) + int(fields[12])  # fields 14 and 15 of the line
+
+
+def _stat(path: str) -> list[bytes]:
+    """The fields of a ``stat`` file after the command name (field 3, the state, first)."""
+    with open(path, "rb") as f:
+        return f.read().rsplit(b")", 1)[1].split()
 
 
 class _Processes:
@@ -224,7 +234,7 @@ class PlanningWorker:
         scenario: the scenario whose estimate the worker builds (once per process).
         jobs: the physics check's rollout processes (``risk.rollouts.jobs``), started by the
             worker (0: the worker runs no physics check).
-        nice: the worker's niceness increment (0: none).
+        nice: the worker's niceness increment (0: none; None: :data:`NICE`).
         hang_s: a heartbeat older than this (s) is a hang.
 
     The process is spawned at once and builds its world while the caller goes on. Use
@@ -232,10 +242,12 @@ class PlanningWorker:
     :meth:`close` at the end (also done when the interpreter exits, or this object is collected).
     """
 
-    def __init__(self, scenario: Scenario, jobs: int, *, nice: int = NICE, hang_s: float = HANG_S) -> None:
+    def __init__(
+        self, scenario: Scenario, jobs: int, *, nice: int | None = None, hang_s: float = HANG_S
+    ) -> None:
         self.scenario = scenario
         self.jobs = jobs
-        self.nice = nice
+        self.nice = NICE if nice is None else nice
         self.hang_s = hang_s
         self.replaced = 0  # workers replaced so far
         self._ctx = multiprocessing.get_context("spawn")
