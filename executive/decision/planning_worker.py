@@ -143,6 +143,7 @@ class _Instance:
             try:
                 kind, ticket, payload = self.conn.recv()
             except (EOFError, OSError):
+                self.conn.close()
                 break
             if kind == "ready":
                 self.ready = True
@@ -164,29 +165,40 @@ class _Instance:
             return None
         stale = now - beat > hang_s
         if stale or now - self.sampled > _SAMPLE_S:
-            states, cpu = _threads(self.process.pid)
+            cpu = _cpu_time(self.process.pid)
             self.sampled = now
-            if cpu != self.cpu or "R" in states:  # it computes, or a thread waits for a core
+            if cpu != self.cpu:  # it computes
                 self.cpu, self.computed = cpu, now
-            if stale and states & {"T", "t"}:
-                return f"hangs: stopped (no heartbeat for {now - beat:.2f} s)"
-        if stale and now - max(beat, self.computed) > hang_s:
+        if not stale:
+            return None
+        states = _thread_states(self.process.pid)
+        if states & {"T", "t"}:
+            return f"hangs: stopped (no heartbeat for {now - beat:.2f} s)"
+        if "R" in states:  # a thread waits for a core (the lock's holder, preempted)
+            self.computed = now
+        if now - max(beat, self.computed) > hang_s:
             return f"hangs: no heartbeat and no CPU time for {now - beat:.2f} s (limit {hang_s:g} s)"
         return None
 
 
-def _threads(pid: int | None) -> tuple[set[str], int]:
-    """The state letters of process ``pid``'s threads and its CPU time (user + system, clock
-    ticks), from Linux's ``/proc/<pid>/task/*/stat`` and ``/proc/<pid>/stat`` (proc(5));
-    ``(set(), -1)`` where they cannot be read."""
-    states: set[str] = set()
+def _cpu_time(pid: int | None) -> int:
+    """Process ``pid``'s CPU time (user + system, clock ticks; fields 14 and 15 of Linux's
+    ``/proc/<pid>/stat``, proc(5)); -1 where it cannot be read."""
     try:
-        for task in os.listdir(f"/proc/{pid}/task"):
-            states.add(_stat(f"/proc/{pid}/task/{task}/stat")[0].decode())
         fields = _stat(f"/proc/{pid}/stat")
+        return int(fields[11]) + int(fields[12])
+    except (OSError, IndexError, ValueError):
+        return -1
+
+
+def _thread_states(pid: int | None) -> set[str]:
+    """The state letters of process ``pid``'s threads (``/proc/<pid>/task/*/stat``); empty
+    where they cannot be read."""
+    try:
+        tasks = os.listdir(f"/proc/{pid}/task")
+        return {_stat(f"/proc/{pid}/task/{task}/stat")[0].decode() for task in tasks}
     except (OSError, IndexError):
-        return set(), -1
-    return states, int(fields[11]) + int(fields[12])  # fields 14 and 15 of the line
+        return set()
 
 
 def _stat(path: str) -> list[bytes]:
@@ -204,27 +216,29 @@ class _Processes:
         self.retired: list[multiprocessing.process.BaseProcess] = []
         self.closed = False
 
-    def close(self) -> None:
-        """Stop the worker (it ends its rollout processes) and wait for it; kill it if it is busy
-        or does not stop."""
-        if self.closed:
-            return
-        self.closed = True
+    def close(self, wait: bool = False) -> None:
+        """Tell the worker to stop (it ends its rollout processes); kill it if it is busy or still
+        starting. ``wait``: also wait for it (and kill it if it has not stopped in 10 s).
+
+        Without ``wait`` the worker ends on its own; the interpreter waits for it at exit.
+        """
         now = self.now
-        if now.pending or not now.ready:  # busy (or still building): nothing to wait for
-            now.process.kill()
-        else:
-            try:
-                now.conn.send(None)
-            except (BrokenPipeError, OSError):
-                pass
+        if not self.closed:
+            self.closed = True
+            if now.pending or not now.ready:  # busy (or still building): nothing to wait for
+                now.process.kill()
+            else:
+                try:
+                    now.conn.send(None)
+                except (BrokenPipeError, OSError):
+                    now.process.kill()
+        if wait:
             now.process.join(timeout=10.0)
             if now.process.exitcode is None:
                 now.process.kill()
-        now.process.join(timeout=5.0)
-        for process in self.retired:
-            process.join(timeout=5.0)
-        now.conn.close()
+                now.process.join(timeout=5.0)
+            for process in self.retired:
+                process.join(timeout=5.0)
 
 
 class PlanningWorker:
@@ -343,6 +357,10 @@ class PlanningWorker:
         self.replaced += 1
         return self.pid
 
-    def close(self) -> None:
-        """Stop the worker (it ends its rollout processes) and wait for it (kill it if busy)."""
-        self._processes.close()
+    def close(self, wait: bool = False) -> None:
+        """Stop the worker (it ends its rollout processes; killed if busy); ``wait``: wait for it.
+
+        Without ``wait`` this returns at once (the tick that ends a mission calls it); the
+        interpreter waits for the worker at exit.
+        """
+        self._processes.close(wait)
