@@ -171,6 +171,7 @@ class RiskSelector(py_trees.composites.Composite):
         self._losses = 0  # workers lost in this decision
         self._result: PlanningResult | None = None  # its result, once received
         self._built: dict[str, py_trees.behaviour.Behaviour] = {}  # subtrees built from it so far
+        self._adopted = False  # whether the monitor has its prepared distances
         self._approved: set[str] = set()
         self._by_name: dict[str, py_trees.behaviour.Behaviour] = {}
         self._last_look: float | None = None  # robot time of the last observation
@@ -197,7 +198,12 @@ class RiskSelector(py_trees.composites.Composite):
 
     def setup(self, **kwargs: Any) -> None:
         """Heavy work once: planning inside the tick (``background`` False) builds its planner and
-        collision model of the estimate now; a worker builds its own."""
+        collision model of the estimate now; a worker builds its own. The behaviours a subtree is
+        made of are imported now: subtrees are built in ticks."""
+        import behaviours.gripper
+        import behaviours.handover
+        import behaviours.push  # noqa: F401
+
         if not self.background and self._local is None:
             self._local = Planning(self.estimate, self.physics)
             self._local.tools(self.name)
@@ -281,6 +287,7 @@ class RiskSelector(py_trees.composites.Composite):
         """Hand the decision's job to the worker, or (``background`` False) work it out now."""
         assert self._job is not None
         self._ticket, self._lost, self._result, self._built = None, None, None, {}
+        self._adopted = False
         if not self.background:
             self.setup()
             assert self._local is not None
@@ -340,7 +347,8 @@ class RiskSelector(py_trees.composites.Composite):
 
     def _planning_step(self) -> Status | None:
         """Wait for the decision's result; then, a tick each: log it, build the feasible
-        alternatives' subtrees one by one, and decide (in one tick when planning in the tick)."""
+        alternatives' subtrees one by one, hand the prepared distances to the monitor, and decide
+        (all in one tick when planning in the tick)."""
         spread = self.background  # from a worker: keep every tick short
         if self._result is None:
             try:
@@ -368,8 +376,11 @@ class RiskSelector(py_trees.composites.Composite):
             if spread:
                 self.feedback_message = f"planning {self.name}: {alt.name} ready"
                 return Status.RUNNING
-        if feasible:
+        if feasible and not self._adopted:
             self._adopt(feasible[0])
+            self._adopted = True
+            if spread:
+                return Status.RUNNING
         return self._decide(self._result.results, self._built)
 
     def _receive(self) -> PlanningResult | None:
