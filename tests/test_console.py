@@ -9,9 +9,12 @@ ghost against the plan's kinematics. The browser test is tests/test_console_brow
 from __future__ import annotations
 
 import json
+import os
 import socket
+import subprocess
 import sys
 import time
+import urllib.request
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -19,6 +22,7 @@ import mujoco
 import numpy as np
 import py_trees
 import pytest
+import yaml
 
 from executive.cli.main import main
 from executive.console.channel import ConsoleChannel, EitherChannel
@@ -321,7 +325,7 @@ def test_a_ghost_follows_the_plan_and_marks_the_closest_approach_coal_found() ->
     console = Console(0)
     try:
         mujoco.mj_forward(world.model, world.data)
-        console._world(world.model, world.data, world)
+        console.show_world(world.model, world.data, world)
         console.show_alternatives("task0", "task0", world, results, "expected_loss", 0.3)
         view = console.tasks["task0"]
         assert set(view.sliders) == {a.name for a in results if a.feasible}
@@ -348,3 +352,38 @@ def test_a_ghost_follows_the_plan_and_marks_the_closest_approach_coal_found() ->
                 np.testing.assert_allclose(handle.batched_positions, centres, atol=1e-5)
     finally:
         console.close()
+
+
+def test_executive_run_console_serves_the_page_while_it_plans(tmp_path: Path) -> None:
+    """`executive run --console`: the address is printed first and the page answers while planning;
+    with `--approve deny` the page only shows (the policy answers) and the command ends."""
+    pytest.importorskip("viser", reason='the console extra is not installed: pip install ".[console]"')
+    doc = yaml.safe_load(
+        (Path(__file__).resolve().parents[1] / "scenarios" / "book_transfer.yaml").read_text()
+    )
+    doc["risk"]["threshold"] = 0.001
+    risky = tmp_path / "risky.yaml"
+    risky.write_text(yaml.safe_dump(doc, sort_keys=False))
+    script = Path(sys.executable).parent / "executive"
+    cmd = [str(script)] if script.exists() else [sys.executable, "-m", "executive.cli.main"]
+    args = ["run", str(risky), "--console", "--console-port", "0", "--approve", "deny", "--rollouts", "0"]
+    out = tmp_path / "run"
+    env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
+    proc = subprocess.Popen(
+        [*cmd, *args, "--exact", "--out", str(out)], stdout=subprocess.PIPE, text=True, env=env
+    )
+    try:
+        assert proc.stdout is not None
+        first = proc.stdout.readline()
+        assert first.startswith("console   http://127.0.0.1:"), first
+        url = first.split()[1]
+        with urllib.request.urlopen(url, timeout=10) as page:
+            assert page.status == 200 and b"<html" in page.read(2000).lower()
+        rest, _ = proc.communicate(timeout=120)
+        assert "policy:deny" in rest
+    finally:
+        proc.kill()
+    assert proc.returncode == 1  # denied: the task ends aborted
+    approval = [json.loads(line) for line in (out / "decisions.jsonl").read_text().splitlines()]
+    approval = [e for e in approval if e["kind"] == "approval"]
+    assert [(e["decision"], e["by"]) for e in approval] == [("deny", "policy:deny")]

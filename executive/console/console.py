@@ -24,6 +24,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+import mujoco
 import numpy as np
 import py_trees
 
@@ -91,8 +92,9 @@ class Console:
 
     # --- filling the page -----------------------------------------------------------------
 
-    def _world(self, model: Any, data: Any, estimate: World) -> None:
-        """The scene of ``model`` at ``data``; ghosts of plans made on ``estimate``."""
+    def show_world(self, model: mujoco.MjModel, data: mujoco.MjData, estimate: World) -> None:
+        """Draw a world: the scene of ``model`` at ``data`` (the one the page follows), lit, the camera
+        on the robot and the table; the ghosts of plans made on ``estimate`` will be drawn on it."""
         light(self.server)
         self.view = WorldView(self.server, model, data)
         self.ghost = GhostView(self.server, estimate)
@@ -118,7 +120,16 @@ class Console:
         threshold: float,
         note: str = "",
     ) -> None:
-        """Show one task's decision: its rows, and a ghost motion per feasible alternative with a plan."""
+        """Show one task's decision: its rows, and a ghost motion per feasible alternative with a plan.
+
+        Args:
+            key: the task's key (``task0``); a key shown before is laid out anew.
+            label: the task's folder title.
+            estimate: the world the alternatives were planned on.
+            results: every alternative's assessment (after the physics check, if one ran).
+            ordering: the scenario's ``risk.ordering``; ``threshold``: its ``risk.threshold``.
+            note: a line above the table (what the numbers are).
+        """
         rows = [risk_row(a, ordering) for a in results]
         motions = {
             a.name: PlannedMotion(estimate, a) for a in results if a.plan is not None and a.risk is not None
@@ -126,9 +137,15 @@ class Console:
         self.task_view(key, label).show(rows, ordering, threshold, motions, note)
 
     def attach(self, executive: Executive) -> None:
-        """Follow ``executive`` live (its tick listeners get the console's feed); returns at once."""
+        """Follow ``executive`` live; returns at once.
+
+        The console's feed joins ``executive.tick_listeners``, and the console's thread draws the
+        scene (the truth world the executive steps, or for a host's robot the estimate at the
+        robot's joints), each task's decisions, the approval section and the tree. To take
+        approvals on the page, build the executive with ``approval=console.channel``.
+        """
         robot_world = executive.truth if executive.truth is not None else executive.estimate
-        self._world(robot_world.model, executive.robot.data, executive.estimate)
+        self.show_world(robot_world.model, executive.robot.data, executive.estimate)
         executive.tick_listeners.append(self.feed)
         self._start(lambda: self._follow(executive))
 
@@ -197,13 +214,11 @@ class Console:
         """Plan every task of ``scenario`` on its estimate and check the plans in physics, as
         ``executive plan`` does, showing the analytic table at once and the checked one after;
         nothing is executed. Returns at once (the planning runs in the console's thread)."""
-        import mujoco
-
         from executive.world.model import build
 
         world = build(scenario)
         mujoco.mj_forward(world.model, world.data)
-        self._world(world.model, world.data, world)
+        self.show_world(world.model, world.data, world)
         self.status.content = f"**{scenario.name}** · planning (nothing is executed)"
         self._start(lambda: self._plan(scenario, world))
 
@@ -275,15 +290,13 @@ class Console:
             return False
         data = world.data
         data.qpos[:] = record.qpos[0]
-        self._world(world.model, data, world)
+        self.show_world(world.model, data, world)
         assert self.view is not None
         self.replay = ReplayView(self.server, record, self.view, self.tree, order=5)
         return True
 
     def _scene_of(self, run: dict[str, Any]) -> None:
         """The run's scenario as it starts, when its file can still be loaded (else no scene)."""
-        import mujoco
-
         from executive.errors import ExecutiveError
         from executive.scenario import load
         from executive.world.model import build
@@ -297,7 +310,7 @@ class Console:
             self._error(exc)
             return
         mujoco.mj_forward(world.model, world.data)
-        self._world(world.model, world.data, world)
+        self.show_world(world.model, world.data, world)
 
     # --- end ------------------------------------------------------------------------------
 
