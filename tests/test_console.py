@@ -30,6 +30,7 @@ from executive.console.geoms import drawn_geoms, shape_batches
 from executive.console.live import LiveFeed, RealTimePacer
 from executive.console.risk_table import physics_table, risk_table
 from executive.console.run_log import read_decisions, task_decisions
+from executive.console.scene import STILL
 from executive.console.server import ConsoleError
 from executive.decision.approval import AlternativeRisk, ApprovalRequest, PendingApproval
 from executive.scenario import load
@@ -349,7 +350,7 @@ def test_a_ghost_follows_the_plan_and_marks_the_closest_approach_coal_found() ->
                     data.geom_xpos[batch.geoms]
                     + data.geom_xmat[batch.geoms].reshape(-1, 3, 3)[:, :, 2] * batch.offsets[:, None]
                 )
-                np.testing.assert_allclose(handle.batched_positions, centres, atol=1e-5)
+                np.testing.assert_allclose(handle.batched_positions, centres, atol=STILL)
     finally:
         console.close()
 

@@ -29,6 +29,7 @@ import yaml
 
 from executive.console.channel import operator_name
 from executive.console.risk_table import number
+from executive.console.scene import STILL
 from executive.decision.physics_check import with_rollouts
 from executive.scenario import load
 
@@ -134,7 +135,7 @@ def _ghost_matches_plan(console: Any, name: str) -> float:
         for batch, handle in zip(ghost._ghost.batches, ghost._ghost.handles, strict=True):
             axes = data.geom_xmat[batch.geoms].reshape(-1, 3, 3)[:, :, 2]
             expected = data.geom_xpos[batch.geoms] + axes * batch.offsets[:, None]
-            np.testing.assert_allclose(handle.batched_positions, expected, atol=1e-5)
+            np.testing.assert_allclose(handle.batched_positions, expected, atol=STILL)
         return float(ghost.time)
 
 

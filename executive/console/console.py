@@ -48,6 +48,7 @@ if TYPE_CHECKING:
 __all__ = ["Console"]
 
 TEXT_PERIOD_S = 0.5  # s between redraws of the status line and the tree
+DRAW_SHARE = 0.02  # most of the wall time the console's thread spends moving the scene
 CAMERA_OFFSET = np.array([1.6, 1.0, 1.1])  # m from the point looked at
 IDLE_WAIT_S = 0.25
 
@@ -80,6 +81,7 @@ class Console:
         self.view: WorldView | None = None
         self.ghost: GhostView | None = None
         self.feed = LiveFeed(rate_hz)
+        self._period = self.feed.period
         self.errors: list[str] = []
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -161,7 +163,11 @@ class Console:
             snap = self.feed.take(IDLE_WAIT_S)
             try:
                 if snap is not None and self.view is not None:
+                    t0 = time.perf_counter()
                     self.view.update(snap.qpos)
+                    # Draw less often when drawing is slow (a robot of many meshes): at most
+                    # DRAW_SHARE of the time goes to it, so the ticking loop keeps its interpreter.
+                    self.feed.period = max(self._period, (time.perf_counter() - t0) / DRAW_SHARE)
                 self._decisions(executive)
                 self.approval.refresh()
                 now = time.perf_counter()

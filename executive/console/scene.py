@@ -20,7 +20,11 @@ from executive.console.geoms import FloatArray, ShapeBatch, shape_batches
 if TYPE_CHECKING:
     import viser
 
-__all__ = ["InstancedGeoms", "WorldView", "light", "moving_geoms", "static_geoms"]
+__all__ = ["STILL", "InstancedGeoms", "WorldView", "light", "moving_geoms", "static_geoms"]
+
+#: A shape whose instances all moved less than this (m, and in each quaternion component) since
+#: they were last sent is not sent again (0.1 mm; 1e-4 in a unit quaternion is 0.01 degree).
+STILL = 1e-4
 
 
 def moving_geoms(model: mujoco.MjModel) -> list[int]:
@@ -105,11 +109,20 @@ class InstancedGeoms:
         """Per batch the (positions, wxyz) of its instances in ``data`` (kinematics done)."""
         return [batch.poses(self.model, data) for batch in self.batches]
 
-    def update(self, data: mujoco.MjData) -> None:
-        """Move every instance to its geom's pose in ``data`` (kinematics done): one message per shape."""
+    def update(self, data: mujoco.MjData) -> int:
+        """Move every instance to its geom's pose in ``data`` (kinematics done): one message per shape
+        whose instances moved (by more than :data:`STILL`); returns the shapes sent."""
+        sent = 0
         for handle, (positions, wxyz) in zip(self.handles, self.poses(data), strict=True):
-            handle.batched_positions = positions.astype(np.float32)
-            handle.batched_wxyzs = wxyz.astype(np.float32)
+            p, q = positions.astype(np.float32), wxyz.astype(np.float32)
+            if np.abs(p - handle.batched_positions).max(initial=0.0) <= STILL and (
+                np.abs(q - handle.batched_wxyzs).max(initial=0.0) <= STILL
+            ):
+                continue
+            handle.batched_positions = p
+            handle.batched_wxyzs = q
+            sent += 1
+        return sent
 
     @property
     def visible(self) -> bool:
