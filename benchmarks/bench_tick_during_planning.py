@@ -26,8 +26,9 @@ planning wall time in the worker (the planning line to the tick that took the re
 reference's, and their ratio. Targets (issue 19): p99 under 2 ms, longest under 5 ms on 2 cores,
 the worker's planning at most 1.2 x the reference.
 
-The load of other processes adds to every number here: the script prints the load average
-before and after each run.
+The load of other processes adds to every number here: the script prints the cores' busy
+fraction just before the reference and before the loop, and the load average before and
+after both; ``--wait-quiet F`` waits before each until the cores were busy less than F of 3 s.
 """
 
 from __future__ import annotations
@@ -52,6 +53,29 @@ from executive.world.model import build
 
 def _load() -> str:
     return Path("/proc/loadavg").read_text().split()[0] if Path("/proc/loadavg").exists() else "?"
+
+
+def _busy(window_s: float) -> float:
+    """The fraction of all cores' time spent busy over the next ``window_s`` (Linux /proc/stat)."""
+
+    def ticks() -> tuple[int, int]:
+        fields = [int(v) for v in Path("/proc/stat").read_text().split("\n", 1)[0].split()[1:]]
+        return sum(fields), fields[3] + fields[4]  # all, idle + iowait
+
+    total0, idle0 = ticks()
+    time.sleep(window_s)
+    total1, idle1 = ticks()
+    return 1.0 - (idle1 - idle0) / max(1, total1 - total0)
+
+
+def wait_quiet(max_busy: float, window_s: float = 3.0, timeout_s: float = 1800.0) -> float:
+    """Wait until the cores were busy less than ``max_busy`` of a ``window_s`` (other processes'
+    work); the last window's busy fraction (above ``max_busy`` if ``timeout_s`` ran out)."""
+    deadline = time.monotonic() + timeout_s
+    busy = _busy(window_s)
+    while busy > max_busy and time.monotonic() < deadline:
+        busy = _busy(window_s)
+    return busy
 
 
 def reference(scenario: Scenario) -> float:
@@ -157,6 +181,13 @@ def main() -> None:
     parser.add_argument("--rollouts", type=int, default=None, help="risk.rollouts.count")
     parser.add_argument("--nice", type=int, default=None, help=f"worker niceness ({planning_worker.NICE})")
     parser.add_argument("--no-reference", action="store_true", help="skip the in-process reference")
+    parser.add_argument(
+        "--wait-quiet",
+        type=float,
+        default=None,
+        metavar="F",
+        help="before each run wait until the cores were busy less than F of 3 s (other processes)",
+    )
     args = parser.parse_args()
     scenario = with_rollouts(load(args.scenario), args.rollouts)
     if args.nice is not None:
@@ -166,17 +197,21 @@ def main() -> None:
         f"worker nice {planning_worker.NICE}, {os.cpu_count()} cores"
     )
     head = f"{'Hz':>4}{'ticks':>7}{'p50 ms':>8}{'p99 ms':>8}{'max ms':>8}{'its cpu':>8}{'>2ms':>6}{'>5ms':>6}"
-    print(head + f"{'late':>6}{'worker s':>10}{'here s':>8}{'ratio':>7}  load")
+    print(head + f"{'late':>6}{'worker s':>10}{'here s':>8}{'ratio':>7}  busy before, load")
     for rate in (float(r) for r in args.rates.split(",")):
         for _ in range(args.repeat):
+            quiet = args.wait_quiet
+            busy = [wait_quiet(quiet) if quiet is not None else _busy(1.0)]
             load_before = _load()
             here = float("nan") if args.no_reference else reference(scenario)
+            busy.append(wait_quiet(quiet) if quiet is not None else _busy(1.0))
             run = host_loop(scenario, rate)
             ratio = run["planning_s"] / here
             print(
                 f"{rate:>4.0f}{run['ticks']:>7}{run['p50']:>8.2f}{run['p99']:>8.2f}{run['longest']:>8.2f}"
                 f"{run['longest_cpu']:>8.2f}{run['over2']:>6}{run['over5']:>6}{run['overruns']:>6}"
-                f"{run['planning_s']:>10.2f}{here:>8.2f}{ratio:>7.2f}  {load_before}->{_load()}",
+                f"{run['planning_s']:>10.2f}{here:>8.2f}{ratio:>7.2f}  "
+                f"{busy[0]:.0%} {busy[1]:.0%}, {load_before}->{_load()}",
                 flush=True,
             )
 

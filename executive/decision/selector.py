@@ -347,8 +347,8 @@ class RiskSelector(py_trees.composites.Composite):
 
     def _planning_step(self) -> Status | None:
         """Wait for the decision's result; then, a tick each: log it, build the feasible
-        alternatives' subtrees one by one, hand the prepared distances to the monitor, and decide
-        (all in one tick when planning in the tick)."""
+        alternatives' subtrees one by one, hand the prepared distances to the monitor, decide, and
+        tick the chosen subtree from the next tick on (all in one tick when planning in the tick)."""
         spread = self.background  # from a worker: keep every tick short
         if self._result is None:
             try:
@@ -381,7 +381,10 @@ class RiskSelector(py_trees.composites.Composite):
             self._adopted = True
             if spread:
                 return Status.RUNNING
-        return self._decide(self._result.results, self._built)
+        decided = self._decide(self._result.results, self._built)
+        if decided is None and spread:  # the chosen subtree's first tick (its motion's set-up) is the next
+            return Status.RUNNING
+        return decided
 
     def _receive(self) -> PlanningResult | None:
         """The worker's result if it has come (None: not yet); raises WorkerLost."""
