@@ -162,7 +162,7 @@ def _replay(page: Any, folder: Path) -> None:
             np.testing.assert_array_equal(replay.view.qpos, record.qpos[frame])
         t = record.times[frame]
         assert t == pytest.approx(record.times[0] + 0.8 * record.duration, abs=0.05 * record.duration)
-        page.get_by_text(f"tick {int(record.ticks[frame])} ").first.wait_for(timeout=10_000)
+        page.get_by_text(f"tick {int(record.ticks[frame])} ").first.wait_for(timeout=30_000)
     finally:
         replay.close()
 
@@ -221,9 +221,9 @@ def test_approve_a_risky_alternative_from_the_page(run: tuple[Any, Any, Path, Ti
         while np.allclose(console.view.qpos, start) and time.monotonic() < deadline:
             time.sleep(0.1)
         assert not np.allclose(console.view.qpos, start)
-        page.get_by_text("[executing]").first.wait_for(timeout=10_000)
+        page.get_by_text("[executing]").first.wait_for(timeout=30_000)
         # The behaviour tree, live: the approved alternative's subtree is running.
-        page.get_by_text(f"{{-}} {request.recommended} [*]").first.wait_for(timeout=10_000)
+        page.get_by_text(f"{{-}} {request.recommended} [*]").first.wait_for(timeout=30_000)
         ticking.stop()
         _replay(page, folder)
         browser.close()
