@@ -180,7 +180,7 @@ def test_pick_then_place_in_physics_puts_the_book_at_its_target(tmp_path: Path) 
     from executive.runtime.mission import Executive
 
     drift: list[float] = []
-    with Executive(_pick_then_place(tmp_path), approval="deny", truth="exact", pace_waiting=False) as ex:
+    with Executive(_pick_then_place(tmp_path), approval="deny", truth="exact", pace_waiting=True) as ex:
         truth = ex.truth
         assert truth is not None
         book = truth.ids.object_bodies["book"]
