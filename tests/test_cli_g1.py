@@ -69,8 +69,6 @@ def test_run_completes(g1_scenario_yaml: str, tmp_path: Path, truth: tuple[str, 
 @pytest.mark.slow
 def test_small_campaign_runs(g1_file: Path, tmp_path: Path) -> None:
     folder = tmp_path / "campaign"
-    out = _ok(
-        _cli("campaign", str(g1_file), "--trials", "2", "--alternatives", "left", "--out", str(folder))
-    )
+    out = _ok(_cli("campaign", str(g1_file), "--trials", "2", "--alternatives", "left", "--out", str(folder)))
     rows = [line.split() for line in out.splitlines() if line.startswith(("left ", "right "))]
     assert [r[:2] for r in rows] == [["left", "2"]], out

@@ -15,7 +15,15 @@ from executive.planning.plan import CompositionConfig, Step
 from executive.schema.types import Body, SceneConfig
 from executive.tasks.hands import UP, HandFrames
 
-__all__ = ["carry_lane_front", "grasp_height", "lane_carry", "one_hand_leg", "pick", "place", "reached_through"]
+__all__ = [
+    "carry_lane_front",
+    "grasp_height",
+    "lane_carry",
+    "one_hand_leg",
+    "pick",
+    "place",
+    "reached_through",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -131,7 +139,12 @@ def carry_lane_front(
 
 
 def reached_through(
-    scene: SceneConfig, y_span: tuple[float, float], reach: float, base_x: float, beyond: float, ceiling: float
+    scene: SceneConfig,
+    y_span: tuple[float, float],
+    reach: float,
+    base_x: float,
+    beyond: float,
+    ceiling: float,
 ) -> bool:
     """Whether the arm reaches past an obstacle (a front wall with ports) to work across ``y_span``.
 
@@ -216,7 +229,9 @@ def one_hand_leg(
     if through:
         entry = (Step("move", f"{side}.reach_in", side, (h.target(side, own_line, yaw),)),)
         back = (Step("move", f"{side}.back", side, (h.target(side, own_line, end_yaw, yaw),)),)
-    elif h.world.profile.return_along_lane and h.side_of_body(place_at) != h.side_of_body(h.home[side].position):
+    elif h.world.profile.return_along_lane and h.side_of_body(place_at) != h.side_of_body(
+        h.home[side].position
+    ):
         back_point = np.array([lane_x, h.home[side].position[1], carry_z])
         back = (Step("move", f"{side}.back", side, (h.target(side, back_point, end_yaw, yaw),)),)
     return [
