@@ -81,6 +81,9 @@ class Pty:
         pid, fd = pty.fork()
         if pid == 0:  # the child: the pty is its stdin, stdout, stderr and controlling terminal
             try:
+                # Ctrl-C as at a terminal, even when the tests run in the background (a shell
+                # starts background jobs with SIGINT ignored, and an exec keeps that).
+                signal.signal(signal.SIGINT, signal.SIG_DFL)
                 os.execve(argv[0], argv, ENV)
             finally:
                 os._exit(127)
