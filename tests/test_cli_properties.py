@@ -199,7 +199,7 @@ def _stage(argv: list[str], err: str) -> str:
 
 
 @settings(
-    max_examples=1500,
+    max_examples=800,
     deadline=None,
     suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture],
 )
