@@ -20,6 +20,10 @@ Per rate R (Hz) and repeat:
    result in. Each tick's wall time (the tree and the bundled physics step) and the ticking
    thread's CPU time are recorded.
 
+``--host-robot``: the host drives its own robot instead of the executive's bundled simulation: a
+:class:`executive.execution.robot_interface.HostRobot` over a second world of the scenario that the
+host steps itself (sync before each tick, its servo period after; only ``tick()`` is timed).
+
 Printed per run: the ticks during planning, their p50, p99 and longest wall time, how many took
 over 2 and 5 ms, the longest one's CPU time (a long tick with little CPU waited for a core); the
 planning wall time in the worker (the planning line to the tick that took the result) and the
@@ -36,14 +40,19 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+import mujoco
 import numpy as np
 
 import executive.decision.planning_worker as planning_worker
+from behaviours.gripper import object_contacts
 from executive.decision.physics_check import PhysicsCheck, with_rollouts
 from executive.decision.planning_job import EstimateState, Planning, PlanningJob
+from executive.execution.robot_interface import HostRobot, JointState
+from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.live_risk import LiveRiskMonitor
 from executive.runtime.mission import Executive, freeze_startup_heap
 from executive.scenario import load
@@ -122,10 +131,62 @@ def _settled(pid: int, quiet_s: float = 0.5, timeout_s: float = 60.0) -> None:
             last, since = now, time.monotonic()
 
 
-def host_loop(scenario: Scenario, rate: float) -> dict[str, Any]:
-    """The host's loop around tick() through the first decision (module docstring, 2)."""
+class Hardware:
+    """A host's robot for ``--host-robot``: a world of the scenario the host steps itself through its
+    own servo loop, behind the :class:`executive.execution.robot_interface.JointIO` protocol."""
+
+    def __init__(self, scenario: Scenario, control_dt: float) -> None:
+        self.world = build(scenario)
+        self.servo = SimulatedRobot(self.world, control_dt=control_dt)
+        model = self.world.model
+        self.joints = {
+            model.joint(j).name: int(model.jnt_qposadr[j])
+            for j in range(model.njnt)
+            if model.joint(j).name
+            and model.jnt_bodyid[j] in self.world.ids.robot_bodies
+            and model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE
+        }
+        self.base = int(model.jnt_qposadr[model.body_jntadr[self.world.ids.base_body]])
+
+    def read(self) -> JointState:
+        qpos = self.world.data.qpos
+        objects = {name: self.world.object_pose(name) for name in self.world.ids.object_bodies}
+        base = self.base
+        position = (float(qpos[base]), float(qpos[base + 1]), float(qpos[base + 2]))
+        quat = (float(qpos[base + 3]), float(qpos[base + 4]), float(qpos[base + 5]), float(qpos[base + 6]))
+        joints = {name: float(qpos[adr]) for name, adr in self.joints.items()}
+        return JointState(float(self.world.data.time), joints, position, quat, objects)
+
+    def send_joint_targets(self, targets: Mapping[str, float]) -> None:
+        q = self.servo.q_target.copy()
+        for name, value in targets.items():
+            q[self.joints[name]] = value
+        self.servo.set_joint_targets(q)
+
+    def send_gripper(self, side: str, closed: bool) -> None:
+        self.servo.set_gripper(side, closed)
+
+    def hand_contacts(self, side: str, obj: str) -> tuple[int, float]:
+        return object_contacts(self.servo, side, obj)
+
+
+def host_loop(scenario: Scenario, rate: float, host_robot: bool = False) -> dict[str, Any]:
+    """The host's loop around tick() through the first decision (module docstring, 2).
+
+    ``host_robot``: the host drives its own robot (:class:`Hardware` behind a ``HostRobot``): it
+    syncs the robot before each tick and steps it after; only ``tick()`` is timed.
+    """
     period = 1.0 / rate
-    executive = Executive(scenario, approval="auto", truth="exact", control_dt=period, pace_waiting=False)
+    hardware = Hardware(scenario, period) if host_robot else None
+    robot = HostRobot(build(scenario), hardware, control_dt=period) if hardware is not None else None
+    executive = Executive(
+        scenario,
+        approval="auto",
+        truth="exact" if robot is None else None,
+        robot=robot,
+        control_dt=period,
+        pace_waiting=False,
+    )
     freeze_startup_heap()
     worker = executive.planning
     assert worker is not None and worker.wait_ready(120.0)
@@ -138,9 +199,13 @@ def host_loop(scenario: Scenario, rate: float) -> dict[str, Any]:
     next_at = time.perf_counter()
     start = time.perf_counter()
     while selector.phase != "executing" and not executive.done:
+        if robot is not None:
+            robot.sync()  # the host reads its robot into the executive's mirror
         t0, c0 = time.perf_counter(), time.thread_time()
         executive.tick()
         t1, c1 = time.perf_counter(), time.thread_time()
+        if hardware is not None:
+            hardware.servo.advance()  # the host steps its own robot
         walls.append(t1 - t0)
         cpus.append(c1 - c0)
         planned = log.of_kind("planning")
@@ -181,6 +246,7 @@ def main() -> None:
     parser.add_argument("--rollouts", type=int, default=None, help="risk.rollouts.count")
     parser.add_argument("--nice", type=int, default=None, help=f"worker niceness ({planning_worker.NICE})")
     parser.add_argument("--no-reference", action="store_true", help="skip the in-process reference")
+    parser.add_argument("--host-robot", action="store_true", help="the host drives its own robot (HostRobot)")
     parser.add_argument(
         "--wait-quiet",
         type=float,
@@ -194,7 +260,8 @@ def main() -> None:
         planning_worker.NICE = args.nice
     print(
         f"{scenario.name}: rollouts {scenario.risk.rollouts.count}, jobs {scenario.risk.rollouts.jobs}, "
-        f"worker nice {planning_worker.NICE}, {os.cpu_count()} cores"
+        f"worker nice {planning_worker.NICE}, {os.cpu_count()} cores, "
+        f"{'the host drives its own robot (HostRobot)' if args.host_robot else 'the bundled simulation'}"
     )
     head = f"{'Hz':>4}{'ticks':>7}{'p50 ms':>8}{'p99 ms':>8}{'max ms':>8}{'its cpu':>8}{'>2ms':>6}{'>5ms':>6}"
     print(head + f"{'late':>6}{'worker s':>10}{'here s':>8}{'ratio':>7}  busy before, load")
@@ -205,7 +272,7 @@ def main() -> None:
             load_before = _load()
             here = float("nan") if args.no_reference else reference(scenario)
             busy.append(wait_quiet(quiet) if quiet is not None else _busy(1.0))
-            run = host_loop(scenario, rate)
+            run = host_loop(scenario, rate, args.host_robot)
             ratio = run["planning_s"] / here
             print(
                 f"{rate:>4.0f}{run['ticks']:>7}{run['p50']:>8.2f}{run['p99']:>8.2f}{run['longest']:>8.2f}"
