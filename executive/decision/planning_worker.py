@@ -9,7 +9,7 @@ physics check with its own warm rollout processes, and then serves jobs. A selec
 :meth:`~PlanningWorker.submit` s a :class:`~executive.decision.planning_job.PlanningJob` (a few
 kB of plain data) and :meth:`~PlanningWorker.poll` s for the result on later ticks; a thread of
 the ticking process receives it (it waits in ``read``, without the lock, and unpickles the
-arrays, about 1 ms for book_transfer's 2.4 MB), so a tick only takes it.
+arrays), so a tick only takes it.
 
 The worker runs at a lower priority (``nice``, default :data:`NICE`; its rollout processes
 inherit it): the ticking process gets the cores first when it wakes.
@@ -21,10 +21,9 @@ Faults are noticed by the process that ticks, on its next :meth:`~PlanningWorker
   monotonic clock) every :data:`BEAT_S`; a heartbeat older than :data:`HANG_S` is a hang. The
   thread is not the job: a plan that takes long (a G1's several seconds) keeps beating. Before
   the worker's first heartbeat (it is importing) the limit is :data:`START_S`.
-  The heartbeat thread needs the interpreter lock, which the job's thread holds while it
-  computes; on a loaded machine the scheduler may leave that thread without a core for most
-  of a second while it holds the lock (seen: 0.8 s at a load of 6 on 2 cores, the worker
-  niced), and no beat is written. So a stale heartbeat is a hang only if the process is
+  The heartbeat thread needs the interpreter lock, which the job's threads hold while they
+  compute; on a loaded machine the scheduler may leave the holder without a core for most of
+  a second (docs/workers.md), and no beat is written. So a stale heartbeat is a hang only if the process is
   stopped, or has used no CPU time meanwhile and none of its threads waits for a core
   (Linux's ``/proc/<pid>/task/*/stat``; elsewhere the heartbeat alone decides). A job stuck
   in an endless loop still beats: it is not a hang.

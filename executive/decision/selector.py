@@ -28,11 +28,12 @@ The worker process does all the heavy work of a decision
 (:class:`executive.decision.planning_job.Planning`): it plans and assesses, dry-runs and
 rolls out in physics, and computes the planned distances of the lowest-risk alternative's
 guarded motions. What comes back is plain data (plans as arrays); the ticks that follow
-log it, build one subtree per tick from the plans (under a millisecond each), hand the
-prepared distances to the live risk monitor (``/executive/live_risk``, if any) and swap the
-subtrees in. A worker that dies or hangs is logged (``planning_worker``) and replaced, and the
-task re-plans from where the robot holds. ``background=False`` does the same work inside
-the tick instead (blocking: for batch use and tests).
+log it, build one subtree per tick from the plans, hand the prepared distances to the live
+risk monitor (``/executive/live_risk``, if any), then rank, select and swap the subtrees in;
+the chosen one is ticked from the next tick on (docs/workers.md). A worker that dies or hangs
+is logged (``planning_worker``) and replaced, and the task re-plans from where the robot
+holds. ``background=False`` does the same work inside the tick instead (blocking: for batch
+use and tests).
 
 Every step is a line in the audit log (:class:`executive.decision.audit.AuditLog`) before
 it is acted on; no alternative above the threshold starts without an approval
