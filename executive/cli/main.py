@@ -417,7 +417,7 @@ def _parser() -> argparse.ArgumentParser:
     _add_campaign(sub)
     _add_fidelity(sub)
     tree_command.add_parser(sub, _SCENARIO_HELP)
-    replay_command.add_parser(sub, _PIXELS)
+    replay_command.add_parser(sub, _PIXELS, _PORT)
     _add_console(sub)
     return parser
 

@@ -57,16 +57,6 @@ def _console(args: argparse.Namespace) -> int:
     return serve_replay(args.run_dir, args.console_port, args.scenario)
 
 
-def _port(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a TCP port (a whole number), got {text!r}") from None
-    if not 0 <= value <= 65535:
-        raise argparse.ArgumentTypeError(f"must be from 0 to 65535 (0: any free port), got {value}")
-    return value
-
-
 def _fps(text: str) -> float:
     try:
         value = float(text)
@@ -78,9 +68,11 @@ def _fps(text: str) -> float:
 
 
 def add_parser(
-    sub: argparse._SubParsersAction[argparse.ArgumentParser], pixels: Callable[[str], int]
+    sub: argparse._SubParsersAction[argparse.ArgumentParser],
+    pixels: Callable[[str], int],
+    port: Callable[[str], int],
 ) -> None:
-    """Add ``replay`` to the ``executive`` command's subcommands (``pixels``: main's size parser)."""
+    """Add ``replay`` to the ``executive`` command's subcommands (``pixels``, ``port``: main's parsers)."""
     p = sub.add_parser(
         "replay",
         help="play a run folder's per-tick record back: a summary per phase, or a video (--video)",
@@ -104,5 +96,5 @@ def add_parser(
         help="play it back on the operator's console (a page on 127.0.0.1 with a time slider; "
         'pip install ".[console]")',
     )
-    p.add_argument("--console-port", type=_port, default=8080, help="the console's port (default 8080)")
+    p.add_argument("--console-port", type=port, default=8080, help="the console's port (default 8080)")
     p.set_defaults(func=run)
