@@ -21,7 +21,7 @@ import pytest
 
 from executive.decision.physics_check import with_rollouts
 from executive.decision.planning_job import EstimateState, Planning, PlanningJob, PlanningResult, ranked
-from executive.decision.planning_worker import HANG_S, PlanningWorker, WorkerLost
+from executive.decision.planning_worker import HANG_S, JOB_S, PlanningWorker, WorkerLost
 from executive.monitoring.live_risk import LiveRiskMonitor
 from executive.runtime.mission import Executive
 from executive.scenario import load
@@ -60,21 +60,37 @@ def _job(world: Any, physics: bool) -> PlanningJob:
     return PlanningJob("task0", task, np.array(world.data.qpos), EstimateState.of(world), physics=physics)
 
 
+def _wait(worker: PlanningWorker, ticket: int, timeout_s: float = 120.0) -> PlanningResult | None:
+    """The result of ``ticket``, polled as a selector polls (None: none within ``timeout_s``)."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        result = worker.poll(ticket)
+        if result is not None:
+            return result
+        time.sleep(0.01)
+    return None
+
+
 def test_the_worker_plans_what_this_process_plans_bit_for_bit() -> None:
     """book_transfer planned and assessed in the worker and here: the same choice, the same plans
-    and risk numbers to the last bit, the same guard distances of the chosen alternative."""
+    and risk numbers to the last bit, the same guard distances of the chosen alternative.
+
+    The worker first served another scenario (pick_place_push) and was kept warm when closed; the
+    next worker of this process is that process, and carries nothing of the first scenario."""
+    other = load("pick_place_push")
+    first = PlanningWorker(other, jobs=0)
+    served = _wait(first, first.submit(_job(build(other), physics=False)))
+    assert served is not None and served.failure is None
+    first.close()  # idle and healthy: kept warm
     scenario = load("book_transfer")
     worker = PlanningWorker(scenario, jobs=0)
     try:
+        assert worker.pid == first.pid == served.pid  # the same process, no new spawn
         world = build(scenario)
         job = _job(world, physics=False)
         ticket = worker.submit(job)  # the worker plans while this process does
         here = Planning(world, None, LiveRiskMonitor(world, scenario.risk.guard)).run(job)
-        there = None
-        deadline = time.monotonic() + 120.0
-        while there is None and time.monotonic() < deadline:
-            there = worker.poll(ticket)
-            time.sleep(0.01)
+        there = _wait(worker, ticket)
     finally:
         worker.close(wait=True)
     assert there is not None and here.failure is None and there.failure is None
@@ -123,6 +139,27 @@ def test_a_stopped_worker_is_noticed_within_a_second_and_a_long_job_is_not() -> 
     assert result.failure is None and result.pid == fresh and result.verdict is not None
     assert result.work_s > HANG_S
     assert _gone(hung)
+
+
+def test_a_job_past_its_deadline_is_a_hang_though_the_worker_beats() -> None:
+    """A job that runs longer than ``job_s`` (here book_transfer's planning, about a second, against
+    0.3 s) is reported as a hang although the worker's heartbeat is fresh: how an endless loop is
+    noticed. The default deadline is JOB_S plus the scenario's rollout budget."""
+    scenario = load("book_transfer")
+    assert PlanningWorker(scenario, jobs=0).job_s == JOB_S + scenario.risk.rollouts.budget_s
+    worker = PlanningWorker(scenario, jobs=0, job_s=0.3)
+    try:
+        assert worker.wait_ready(120.0)
+        ticket = worker.submit(_job(build(scenario), physics=False))
+        sent = time.monotonic()
+        with pytest.raises(WorkerLost) as lost:
+            _wait(worker, ticket, timeout_s=30.0)
+        noticed = time.monotonic() - sent
+    finally:
+        worker.close(wait=True)
+    print(f"{lost.value} after {noticed:.2f} s")
+    assert "hangs: a job has run for" in lost.value.reason and "limit 0.3 s" in lost.value.reason
+    assert 0.3 < noticed < 0.6
 
 
 def _gone(pid: int, within_s: float = 5.0) -> bool:

@@ -221,15 +221,19 @@ class Planning:
         self._tools: dict[str, tuple[Planner, CollisionModel]] = {}
 
     @classmethod
-    def of_scenario(cls, scenario: Scenario, jobs: int) -> Planning:
+    def of_scenario(cls, scenario: Scenario, jobs: int, physics: PhysicsCheck | None = None) -> Planning:
         """Everything built once for ``scenario``: its estimate world, a live risk monitor on it,
-        and a physics check whose ``jobs`` worker processes are started now (0: no physics check)."""
+        and a physics check whose ``jobs`` worker processes are started now (0: no physics check).
+
+        ``physics``: keep this physics check (its processes are warm and take any scenario's jobs)
+        instead of starting another.
+        """
         from executive.monitoring.live_risk import LiveRiskMonitor
         from executive.world.model import build
 
         estimate = build(scenario)
-        physics = PhysicsCheck(jobs) if jobs > 0 else None
-        if physics is not None:
+        if physics is None and jobs > 0:
+            physics = PhysicsCheck(jobs)
             physics.pool.warm()  # the rollout processes start while the first plans are made
         return cls(estimate, physics, LiveRiskMonitor(estimate, scenario.risk.guard))
 

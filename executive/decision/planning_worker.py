@@ -25,13 +25,18 @@ Faults are noticed by the process that ticks, on its next :meth:`~PlanningWorker
   compute; on a loaded machine the scheduler may leave the holder without a core for most of
   a second (docs/workers.md), and no beat is written. So a stale heartbeat is a hang only if the process is
   stopped, or has used no CPU time meanwhile and none of its threads waits for a core
-  (Linux's ``/proc/<pid>/task/*/stat``; elsewhere the heartbeat alone decides). A job stuck
-  in an endless loop still beats: it is not a hang.
+  (Linux's ``/proc/<pid>/task/*/stat``; elsewhere the heartbeat alone decides);
+* a job runs past its deadline (:data:`JOB_S` plus the scenario's rollout budget): a job stuck in
+  an endless loop keeps beating, so this is how it is noticed.
 
 ``poll`` then raises :class:`WorkerLost` (its reason says which); :meth:`~PlanningWorker.replace`
 kills the old process (a hung one too) and starts a fresh one, and the job is submitted again.
 A rollout process whose planning worker died exits by itself
 (:func:`executive.decision.physics_check.exit_with_parent`).
+
+A worker closed while healthy and idle is kept warm (at most :data:`KEEP_IDLE` per process, with
+their rollout processes): the next :class:`PlanningWorker` of this process takes it and has it
+build the new scenario's world, instead of spawning a process and importing everything again.
 """
 
 from __future__ import annotations
@@ -53,7 +58,7 @@ if TYPE_CHECKING:
     from executive.decision.planning_job import PlanningJob, PlanningResult
     from executive.schema.types import Scenario
 
-__all__ = ["BEAT_S", "HANG_S", "NICE", "START_S", "PlanningWorker", "WorkerLost"]
+__all__ = ["BEAT_S", "HANG_S", "JOB_S", "KEEP_IDLE", "NICE", "START_S", "PlanningWorker", "WorkerLost"]
 
 #: The worker's heartbeat period (s).
 BEAT_S = 0.1
@@ -61,10 +66,15 @@ BEAT_S = 0.1
 HANG_S = 0.75
 #: How long (s) a starting worker may take to its first heartbeat (the interpreter's imports).
 START_S = 120.0
+#: How long (s) a job may plan and dry-run before it is taken for stuck; its rollout budget
+#: (``risk.rollouts.budget_s``) is added.
+JOB_S = 300.0
 #: The worker's niceness (added to the ticking process's): the ticks get the cores first.
 NICE = 10
 #: How often (s) a busy worker's CPU time is read while its heartbeat is fresh.
 _SAMPLE_S = 0.2
+#: Idle workers a process keeps warm for its next executives (0: close them).
+KEEP_IDLE = 2
 
 
 class WorkerLost(ExecutiveError):
@@ -114,8 +124,12 @@ def _serve(
                 break
             if message is None:
                 break
-            ticket, job = message
-            conn.send(("result", ticket, planning.run(job)))
+            kind, ticket, payload = message
+            if kind == "scenario":  # taken by another executive: its world, the same rollout processes
+                planning = Planning.of_scenario(payload, jobs, physics=planning.physics)
+                conn.send(("ready", ticket, os.getpid()))
+            else:
+                conn.send(("result", ticket, planning.run(payload)))
     finally:
         stop.set()
         planning.close()
@@ -129,8 +143,11 @@ class _Instance:
     conn: multiprocessing.connection.Connection
     beat: Any  # shared double: the worker's last heartbeat (time.monotonic), 0 before the first
     started: float
+    key: tuple[int, int]  # (rollout jobs, niceness): what a worker taken from the idle ones must have
     inbox: dict[int, PlanningResult] = field(default_factory=dict)
     pending: set[int] = field(default_factory=set)  # tickets sent and neither answered nor forgotten
+    unanswered: dict[int, float] = field(default_factory=dict)  # ticket -> when sent; forgotten too
+    generation: int = 0  # scenarios it was given after its first: its "ready" for the last one counts
     ready: bool = False
     cpu: int = -1  # the process's CPU time (clock ticks) when last read
     sampled: float = 0.0  # when it was last read (time.monotonic)
@@ -145,18 +162,51 @@ class _Instance:
                 self.conn.close()
                 break
             if kind == "ready":
-                self.ready = True
-            elif ticket in self.pending:  # not forgotten meanwhile
+                self.ready = ticket == self.generation
+                continue
+            self.unanswered.pop(ticket, None)
+            if ticket in self.pending:  # not forgotten meanwhile
                 self.inbox[ticket] = payload.native()
                 self.pending.discard(ticket)
 
-    def fault(self, now: float, hang_s: float) -> str | None:
+    def send_job(self, ticket: int, job: PlanningJob) -> None:
+        """Send ``job`` under ``ticket`` (raises OSError if the worker's end is closed)."""
+        self.pending.add(ticket)
+        self.unanswered[ticket] = time.monotonic()
+        try:
+            self.conn.send(("job", ticket, job))
+        except (BrokenPipeError, OSError):
+            self.pending.discard(ticket)
+            self.unanswered.pop(ticket, None)
+            raise
+
+    def rebuild(self, scenario: Scenario) -> None:
+        """Have the idle worker build ``scenario``'s world (it answers "ready" when it has)."""
+        self.generation += 1
+        self.ready = False
+        self.inbox.clear()
+        self.pending.clear()
+        self.conn.send(("scenario", self.generation, scenario))
+
+    def stop(self) -> None:
+        """Tell the worker to stop (it ends its rollout processes); kill it if it is busy or starting."""
+        if self.unanswered or not self.ready:  # busy (or still building): nothing to wait for
+            self.process.kill()
+            return
+        try:
+            self.conn.send(None)
+        except (BrokenPipeError, OSError):
+            self.process.kill()
+
+    def fault(self, now: float, hang_s: float, job_s: float) -> str | None:
         """Why this worker can no longer answer (None: it can)."""
         code = self.process.exitcode
         if code is not None:
             if code < 0:
                 return f"died (killed by {signal.Signals(-code).name})"
             return f"exited with code {code}"
+        if self.unanswered and now - min(self.unanswered.values()) > job_s:
+            return f"hangs: a job has run for {now - min(self.unanswered.values()):.1f} s (limit {job_s:g} s)"
         beat = self.beat.value
         if beat == 0.0:
             if now - self.started > START_S:
@@ -206,6 +256,54 @@ def _stat(path: str) -> list[bytes]:
         return f.read().rsplit(b")", 1)[1].split()
 
 
+class _Idle:
+    """The healthy idle workers this process keeps warm for its next executives."""
+
+    def __init__(self) -> None:
+        self.workers: list[_Instance] = []
+        self.lock = threading.Lock()
+        self.exiting = False
+
+    def park(self, instance: _Instance) -> bool:
+        """Keep ``instance`` for later if it is alive and has no job (False: the caller stops it)."""
+        if self.exiting or KEEP_IDLE < 1 or instance.unanswered or instance.process.exitcode is not None:
+            return False
+        with self.lock:
+            self.workers.append(instance)
+            surplus = self.workers[:-KEEP_IDLE]
+            del self.workers[:-KEEP_IDLE]
+        for old in surplus:
+            old.stop()
+        return True
+
+    def take(self, key: tuple[int, int], scenario: Scenario) -> _Instance | None:
+        """An idle worker with ``key``, now building ``scenario`` (None: there is none)."""
+        with self.lock:
+            found = [w for w in self.workers if w.key == key and w.process.exitcode is None]
+            if not found:
+                return None
+            self.workers.remove(found[-1])
+        try:
+            found[-1].rebuild(scenario)
+        except (BrokenPipeError, OSError):  # it died just now: start a fresh one instead
+            found[-1].process.kill()
+            return None
+        return found[-1]
+
+    def close(self) -> None:
+        """Stop every idle worker; none is kept from now on (the interpreter is exiting)."""
+        self.exiting = True
+        with self.lock:
+            workers, self.workers = self.workers, []
+        for instance in workers:
+            instance.stop()
+
+
+_IDLE = _Idle()
+# At the interpreter's exit, before the workers' own finalizers (priority 10) and the join of its children.
+multiprocessing.util.Finalize(None, _IDLE.close, exitpriority=11)
+
+
 class _Processes:
     """The worker process serving now and those replaced; kept apart from :class:`PlanningWorker`
     so that the interpreter's exit can close them without keeping the worker object alive."""
@@ -216,21 +314,17 @@ class _Processes:
         self.closed = False
 
     def close(self, wait: bool = False) -> None:
-        """Tell the worker to stop (it ends its rollout processes); kill it if it is busy or still
-        starting. ``wait``: also wait for it (and kill it if it has not stopped in 10 s).
+        """Keep the worker warm for this process's next executive if it is idle (:class:`_Idle`),
+        else tell it to stop (it ends its rollout processes; killed if busy or still starting).
+        ``wait``: stop it in any case and wait for it (killed if it has not stopped in 10 s).
 
-        Without ``wait`` the worker ends on its own; the interpreter waits for it at exit.
+        Without ``wait`` a stopped worker ends on its own; the interpreter waits for it at exit.
         """
         now = self.now
         if not self.closed:
             self.closed = True
-            if now.pending or not now.ready:  # busy (or still building): nothing to wait for
-                now.process.kill()
-            else:
-                try:
-                    now.conn.send(None)
-                except (BrokenPipeError, OSError):
-                    now.process.kill()
+            if wait or not _IDLE.park(now):
+                now.stop()
         if wait:
             now.process.join(timeout=10.0)
             if now.process.exitcode is None:
@@ -249,6 +343,8 @@ class PlanningWorker:
             worker (0: the worker runs no physics check).
         nice: the worker's niceness increment (0: none; None: :data:`NICE`).
         hang_s: a heartbeat older than this (s) is a hang.
+        job_s: a job running longer than this (s) is a hang (None: :data:`JOB_S` plus the
+            scenario's rollout budget).
 
     The process is spawned at once and builds its world while the caller goes on. Use
     :meth:`submit` and :meth:`poll` per job, :meth:`replace` after :class:`WorkerLost`,
@@ -256,16 +352,24 @@ class PlanningWorker:
     """
 
     def __init__(
-        self, scenario: Scenario, jobs: int, *, nice: int | None = None, hang_s: float = HANG_S
+        self,
+        scenario: Scenario,
+        jobs: int,
+        *,
+        nice: int | None = None,
+        hang_s: float = HANG_S,
+        job_s: float | None = None,
     ) -> None:
         self.scenario = scenario
         self.jobs = jobs
         self.nice = NICE if nice is None else nice
         self.hang_s = hang_s
+        self.job_s = JOB_S + scenario.risk.rollouts.budget_s if job_s is None else job_s
         self.replaced = 0  # workers replaced so far
         self._ctx = multiprocessing.get_context("spawn")
         self._next_ticket = 0
-        self._processes = _Processes(self._start())
+        warm = _IDLE.take((jobs, self.nice), scenario)
+        self._processes = _Processes(warm if warm is not None else self._start())
         # Before the interpreter joins its children at exit: a worker left running would be waited for.
         multiprocessing.util.Finalize(self, self._processes.close, exitpriority=10)
 
@@ -276,7 +380,7 @@ class PlanningWorker:
         process = self._ctx.Process(target=_serve, args=args, name="planning-worker")
         process.start()
         child.close()
-        instance = _Instance(process, conn, beat, time.monotonic())
+        instance = _Instance(process, conn, beat, time.monotonic(), (self.jobs, self.nice))
         threading.Thread(target=instance.receive, name="planning-results", daemon=True).start()
         return instance
 
@@ -315,12 +419,10 @@ class PlanningWorker:
         self._next_ticket += 1
         ticket = self._next_ticket
         now = self._now
-        now.pending.add(ticket)
         try:
-            now.conn.send((ticket, job))
+            now.send_job(ticket, job)
         except (BrokenPipeError, OSError) as exc:
-            now.pending.discard(ticket)
-            reason = now.fault(time.monotonic(), self.hang_s) or f"cannot be reached ({exc})"
+            reason = now.fault(time.monotonic(), self.hang_s, self.job_s) or f"cannot be reached ({exc})"
             raise WorkerLost(reason, self.pid) from exc
         return ticket
 
@@ -333,7 +435,7 @@ class PlanningWorker:
         result = self._now.inbox.pop(ticket, None)
         if result is not None:
             return result
-        reason = self._now.fault(time.monotonic(), self.hang_s)
+        reason = self._now.fault(time.monotonic(), self.hang_s, self.job_s)
         if reason is not None:
             raise WorkerLost(reason, self.pid)
         return None
