@@ -231,3 +231,31 @@ def test_a_worker_killed_mid_plan_is_logged_and_replaced_and_the_mission_complet
     print(f"book {error * 1000:.1f} mm from the target; old rollout processes {seen['rollout_pids']}")
     assert error < 0.02
     assert all(_gone(pid) for pid in seen["rollout_pids"])  # no orphan left behind
+
+
+def test_a_worker_started_from_a_real_time_thread_runs_at_the_normal_policy() -> None:
+    """A controller's SCHED_FIFO thread builds the executive's worker: the worker and its rollout
+    process run at SCHED_OTHER (at the thread's priority they would take the cores from that very
+    thread), and the thread keeps its policy."""
+    scenario = load("book_transfer")
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(1))
+    except PermissionError:
+        pytest.skip("SCHED_FIFO needs root or CAP_SYS_NICE; run the suite as root (as .ci/run does)")
+    try:
+        worker = PlanningWorker(scenario, jobs=1, nice=3)  # a key no idle worker has: a fresh spawn
+        kept = os.sched_getscheduler(0)
+    finally:
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+    try:
+        assert worker.wait_ready(120.0) and worker.pid is not None
+        deadline = time.monotonic() + 60.0
+        while not _children(worker.pid) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        pids = [worker.pid, *_children(worker.pid)]
+        policies = {pid: os.sched_getscheduler(pid) for pid in pids}
+    finally:
+        worker.close(wait=True)
+    print(f"the thread's policy while it spawned: {kept}; worker and rollout processes: {policies}")
+    assert kept == os.SCHED_FIFO
+    assert len(pids) == 2 and set(policies.values()) == {os.SCHED_OTHER}

@@ -31,6 +31,7 @@ from typing import TYPE_CHECKING, Any
 import mujoco
 import numpy as np
 
+from executive.decision.priority import normal_policy_children
 from executive.errors import ExecutiveError
 from executive.risk.combine import CombinedRisk
 from executive.risk.fusion import choice_confidence, fuse, posteriors
@@ -402,12 +403,15 @@ class RolloutPool:
         if self._pool is not None:
             return []
         pool = self.start()
-        return [pool.submit(_warm_up) for _ in range(self.jobs)]
+        with normal_policy_children():
+            return [pool.submit(_warm_up) for _ in range(self.jobs)]
 
     def __call__(self, jobs: Sequence[RolloutJob]) -> list[dict[str, Any]]:
         pool = self.start()
         try:
-            return list(pool.map(run_job, jobs))
+            with normal_policy_children():  # the pool spawns its processes as jobs are submitted
+                futures = [pool.submit(run_job, job) for job in jobs]
+            return [future.result() for future in futures]
         except concurrent.futures.process.BrokenProcessPool as exc:
             self.close()
             raise RolloutError(f"a physics worker process died: {exc}") from exc

@@ -52,6 +52,7 @@ import time
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from executive.decision.priority import normal_policy_children
 from executive.errors import ExecutiveError
 
 if TYPE_CHECKING:
@@ -378,7 +379,8 @@ class PlanningWorker:
         beat = self._ctx.RawValue("d", 0.0)
         args = (child, beat, self.scenario, self.jobs, self.nice, os.getpid())
         process = self._ctx.Process(target=_serve, args=args, name="planning-worker")
-        process.start()
+        with normal_policy_children():  # not at the priority of a host's real-time thread
+            process.start()
         child.close()
         instance = _Instance(process, conn, beat, time.monotonic(), (self.jobs, self.nice))
         threading.Thread(target=instance.receive, name="planning-results", daemon=True).start()

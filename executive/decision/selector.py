@@ -42,10 +42,11 @@ line naming it (checked in :meth:`RiskSelector._start`).
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Callable, Iterator, Sequence
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import mujoco
 import numpy as np
@@ -58,7 +59,14 @@ from executive.decision.approval import ApprovalChannel, ApprovalDecision, Appro
 from executive.decision.assessment import AlternativeRisk
 from executive.decision.audit import AuditLog
 from executive.decision.physics_check import PhysicsCheck, PhysicsVerdict, physics_text
-from executive.decision.planning_job import EstimateState, Planning, PlanningJob, PlanningResult, ranked
+from executive.decision.planning_job import (
+    EstimateState,
+    Planning,
+    PlanningJob,
+    PlanningResult,
+    PreparedKnots,
+    ranked,
+)
 from executive.decision.planning_worker import PlanningWorker, WorkerLost
 from executive.errors import ExecutiveError
 from executive.risk.collision import breach_summary
@@ -66,6 +74,9 @@ from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
 from executive.world.model import World
 from executive.world.observation import refresh
+
+if TYPE_CHECKING:
+    from executive.planning.plan import AlternativePlan
 
 __all__ = ["RiskSelector", "task_label"]
 
@@ -172,7 +183,7 @@ class RiskSelector(py_trees.composites.Composite):
         self._losses = 0  # workers lost in this decision
         self._result: PlanningResult | None = None  # its result, once received
         self._built: dict[str, py_trees.behaviour.Behaviour] = {}  # subtrees built from it so far
-        self._adopted = False  # whether the monitor has its prepared distances
+        self._swap: list[Callable[[], None]] | None = None  # what is left of taking the result in
         self._approved: set[str] = set()
         self._by_name: dict[str, py_trees.behaviour.Behaviour] = {}
         self._last_look: float | None = None  # robot time of the last observation
@@ -287,8 +298,7 @@ class RiskSelector(py_trees.composites.Composite):
     def _submit(self) -> None:
         """Hand the decision's job to the worker, or (``background`` False) work it out now."""
         assert self._job is not None
-        self._ticket, self._lost, self._result, self._built = None, None, None, {}
-        self._adopted = False
+        self._ticket, self._lost, self._result, self._built, self._swap = None, None, None, {}, None
         if not self.background:
             self.setup()
             assert self._local is not None
@@ -347,9 +357,9 @@ class RiskSelector(py_trees.composites.Composite):
         raise ExecutiveError(f"{self.name}: tick in phase '{self.phase}'")
 
     def _planning_step(self) -> Status | None:
-        """Wait for the decision's result; then, a tick each: log it, build the feasible
-        alternatives' subtrees one by one, hand the prepared distances to the monitor, decide, and
-        tick the chosen subtree from the next tick on (all in one tick when planning in the tick)."""
+        """Wait for the decision's result; then take it in a piece a tick (:meth:`_swap_pieces`),
+        decide, and tick the chosen subtree from the next tick on (all in one tick when planning
+        in the tick)."""
         spread = self.background  # from a worker: keep every tick short
         if self._result is None:
             try:
@@ -360,32 +370,42 @@ class RiskSelector(py_trees.composites.Composite):
                 self.feedback_message = f"planning {self.name}"
                 return Status.RUNNING
             self._losses = 0
+        if self._swap is None:
             failure = self._result.failure
             if failure is not None:
                 return self._finish("failed", {"mode": "planning", "detail": failure.detail()})
-            self._log_physics(self._result.results, self._result.verdict)
+            self._swap = self._swap_pieces(self._result)
             if spread:
                 return Status.RUNNING
-        feasible = ranked(self._result.results, self.ordering)
-        for alt in feasible:
-            if alt.name in self._built:
-                continue
-            assert alt.plan is not None
-            subtree = self.kind.subtree(alt.plan, guard=self.guard)
-            subtree.setup_with_descendants()
-            self._built[alt.name] = subtree
-            if spread:
-                self.feedback_message = f"planning {self.name}: {alt.name} ready"
-                return Status.RUNNING
-        if feasible and not self._adopted:
-            self._adopt(feasible[0])
-            self._adopted = True
+        while self._swap:
+            self._swap.pop(0)()
             if spread:
                 return Status.RUNNING
         decided = self._decide(self._result.results, self._built)
         if decided is None and spread:  # the chosen subtree's first tick (its motion's set-up) is the next
             return Status.RUNNING
         return decided
+
+    def _swap_pieces(self, result: PlanningResult) -> list[Callable[[], None]]:
+        """Taking ``result`` in, in pieces of at most about a millisecond: its physics lines, each
+        feasible alternative's subtree, and per guarded motion of the lowest-risk one its prepared
+        knot distances and its collision pairs (what the guard's first check would build)."""
+        feasible = ranked(result.results, self.ordering)
+        pieces: list[Callable[[], None]] = [lambda: self._log_physics(result.results, result.verdict)]
+        pieces += [functools.partial(self._build, alt) for alt in feasible]
+        monitor = self._monitor()
+        best = feasible[0].plan if feasible else None
+        if monitor is not None and best is not None:
+            pieces += [functools.partial(self._adopt, monitor, best, knots) for knots in result.knots]
+        return pieces
+
+    def _build(self, alt: AlternativeRisk) -> None:
+        """Build ``alt``'s subtree (kept for the decision)."""
+        assert alt.plan is not None
+        subtree = self.kind.subtree(alt.plan, guard=self.guard)
+        subtree.setup_with_descendants()
+        self._built[alt.name] = subtree
+        self.feedback_message = f"planning {self.name}: {alt.name} ready"
 
     def _receive(self) -> PlanningResult | None:
         """The worker's result if it has come (None: not yet); raises WorkerLost."""
@@ -413,21 +433,17 @@ class RiskSelector(py_trees.composites.Composite):
         self._start_planning()  # the robot held meanwhile: re-plan from where it is
         return Status.RUNNING
 
-    def _adopt(self, best: AlternativeRisk) -> None:
-        """Hand the worker's prepared knot distances of ``best``'s guarded motions to the monitor."""
-        monitor = self._monitor()
-        if monitor is None or best.plan is None or self._result is None:
-            return
-        for knots in self._result.knots:
-            trajectory = best.plan.trajectories.get(knots.step)
-            if trajectory is not None:
-                monitor.adopt(
-                    trajectory.qpos,
-                    carried=knots.carried,
-                    allow=knots.allow,
-                    distances=knots.distances,
-                    names=knots.names,
-                )
+    def _adopt(self, monitor: Any, plan: AlternativePlan, knots: PreparedKnots) -> None:
+        """Hand the worker's prepared knot distances of one guarded motion of ``plan`` to ``monitor``."""
+        trajectory = plan.trajectories.get(knots.step)
+        if trajectory is not None:
+            monitor.adopt(
+                trajectory.qpos,
+                carried=knots.carried,
+                allow=knots.allow,
+                distances=knots.distances,
+                names=knots.names,
+            )
 
     def _log_physics(self, results: Sequence[AlternativeRisk], verdict: PhysicsVerdict | None) -> None:
         """One ``dry_run`` line per alternative run in physics, and a ``rollouts`` line if any ran."""

@@ -372,6 +372,7 @@ class LiveRiskMonitor:
             track.missing = int(np.isnan(dist).sum())
             track.window = (-1, -1, -1)
             self.knots_adopted += len(qpos) - track.missing
+            self.collision.warm(carried, allow)  # the pairs the guard's checks use, as prepare builds them
 
     def configuration(self, measured_qpos: FloatArray, planned_qpos: FloatArray) -> FloatArray:
         """The robot where it is measured, the objects where the plan has them (the estimate)."""

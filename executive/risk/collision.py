@@ -501,6 +501,11 @@ class CollisionModel:
         found |= {g for g in pool if self._body_names[int(self.model.geom_bodyid[g])] == name}
         return found
 
+    def warm(self, carried: str | None = None, allow: Allow = ()) -> None:
+        """Build now the geom pairs of queries carrying ``carried`` with ``allow`` removed (the
+        first such query would; built once and kept)."""
+        self._layout(carried, allow)
+
     def _layout(self, carried: str | None, allow: Allow) -> _Layout:
         """The pairs of a query carrying ``carried`` with ``allow`` removed, built once and kept."""
         key = (carried, frozenset(allow))
