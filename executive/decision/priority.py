@@ -15,7 +15,7 @@ from collections.abc import Iterator
 
 __all__ = ["normal_policy_children"]
 
-_REAL_TIME = {getattr(os, "SCHED_FIFO", -1), getattr(os, "SCHED_RR", -1)}
+_REAL_TIME = {getattr(os, "SCHED_FIFO", -2), getattr(os, "SCHED_RR", -2)}
 
 
 @contextlib.contextmanager
@@ -27,8 +27,8 @@ def normal_policy_children() -> Iterator[None]:
         policy = os.sched_getscheduler(0) & ~flag
         param = os.sched_getparam(0)
     except (AttributeError, OSError):  # no POSIX scheduling here
-        policy, param = None, None
-    if policy not in _REAL_TIME or not flag:
+        policy, param = -1, None
+    if policy not in _REAL_TIME or not flag or param is None:
         yield
         return
     os.sched_setscheduler(0, policy | flag, param)
