@@ -15,17 +15,21 @@ Per rate R (Hz) and repeat:
    approval, ``control_dt`` = 1/R, ``pace_waiting`` off: the host keeps the period) is built,
    the heap frozen, and its planning worker waited for, rollout processes included (start-up is
    not planning). The host then calls ``tick()`` at every multiple of 1/R (an absolute
-   schedule, sleeping in between) from the tick that starts planning to the tick that starts
-   the chosen alternative: planning, assessment, dry runs, rollouts, and the ticks that swap the
-   result in. Each tick's wall time (the tree and the bundled physics step) and the ticking
-   thread's CPU time are recorded.
+   schedule, sleeping in between) from the tick that starts planning to the chosen
+   alternative's tenth tick: planning, assessment, dry runs, rollouts, the ticks that swap the
+   result in, and the chosen motion's set-up. Each tick's wall time (the tree and the bundled
+   physics step) and the ticking thread's CPU time are recorded.
 
 ``--host-robot``: the host drives its own robot instead of the executive's bundled simulation: a
 :class:`executive.execution.robot_interface.HostRobot` over a second world of the scenario that the
 host steps itself (sync before each tick, its servo period after; only ``tick()`` is timed).
 
+``--rt P``: the host's loop thread runs at ``SCHED_FIFO`` priority P (as a controller's does; needs
+root or CAP_SYS_NICE), set once the worker is ready; the worker stays at the normal policy.
+
 Printed per run: the ticks during planning, their p50, p99 and longest wall time, how many took
-over 2 and 5 ms, the longest one's CPU time (a long tick with little CPU waited for a core); the
+over 2 and 5 ms, the longest one's CPU time (a long tick with little CPU waited for a core), the
+p99 of the tree's part of the ticks (``tick()`` without the bundled physics step); the
 planning wall time in the worker (the planning line to the tick that took the result) and the
 reference's, and their ratio. Targets (issue 19): p99 under 2 ms, longest under 5 ms on 2 cores,
 the worker's planning at most 1.2 x the reference.
@@ -170,11 +174,16 @@ class Hardware:
         return object_contacts(self.servo, side, obj)
 
 
-def host_loop(scenario: Scenario, rate: float, host_robot: bool = False) -> dict[str, Any]:
+#: Ticks of the chosen alternative in the loop (its motion's set-up is part of the swap).
+CHOSEN_TICKS = 10
+
+
+def host_loop(scenario: Scenario, rate: float, host_robot: bool = False, rt: int = 0) -> dict[str, Any]:
     """The host's loop around tick() through the first decision (module docstring, 2).
 
     ``host_robot``: the host drives its own robot (:class:`Hardware` behind a ``HostRobot``): it
-    syncs the robot before each tick and steps it after; only ``tick()`` is timed.
+    syncs the robot before each tick and steps it after; only ``tick()`` is timed. ``rt``: the loop
+    thread's SCHED_FIFO priority (0: the normal policy).
     """
     period = 1.0 / rate
     hardware = Hardware(scenario, period) if host_robot else None
@@ -191,21 +200,35 @@ def host_loop(scenario: Scenario, rate: float, host_robot: bool = False) -> dict
     worker = executive.planning
     assert worker is not None and worker.wait_ready(120.0)
     _settled(worker.pid or 0)
+    if rt:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(rt))
+    try:
+        return _loop(executive, robot, hardware, period)
+    finally:
+        if rt:
+            os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+def _loop(executive: Executive, robot: Any, hardware: Any, period: float) -> dict[str, Any]:
+    """The timed loop of :func:`host_loop`; its numbers."""
     selector = executive.selectors[0]
     log = executive.log
-    walls, cpus = [], []
+    walls, cpus, trees = [], [], []
     received = None
     overruns = 0
     next_at = time.perf_counter()
     start = time.perf_counter()
-    while selector.phase != "executing" and not executive.done:
+    chosen_ticks = 0
+    while chosen_ticks < CHOSEN_TICKS and not executive.done:
         if robot is not None:
             robot.sync()  # the host reads its robot into the executive's mirror
-        t0, c0 = time.perf_counter(), time.thread_time()
+        t0, c0, tree0 = time.perf_counter(), time.thread_time(), executive.tick_s
         executive.tick()
         t1, c1 = time.perf_counter(), time.thread_time()
+        trees.append(executive.tick_s - tree0)
         if hardware is not None:
             hardware.servo.advance()  # the host steps its own robot
+        chosen_ticks += selector.phase == "executing"
         walls.append(t1 - t0)
         cpus.append(c1 - c0)
         planned = log.of_kind("planning")
@@ -218,7 +241,7 @@ def host_loop(scenario: Scenario, rate: float, host_robot: bool = False) -> dict
         else:
             overruns += 1
             next_at = time.perf_counter()
-    decided = time.perf_counter() - start
+    loop_s = time.perf_counter() - start
     outcome = selector.phase
     executive.stop("benchmark over")
     wall, cpu = np.array(walls) * 1e3, np.array(cpus) * 1e3
@@ -227,13 +250,14 @@ def host_loop(scenario: Scenario, rate: float, host_robot: bool = False) -> dict
         "ticks": len(wall),
         "p50": float(np.percentile(wall, 50)),
         "p99": float(np.percentile(wall, 99)),
+        "tree_p99": float(np.percentile(np.array(trees) * 1e3, 99)),
         "longest": float(wall[longest]),
         "longest_cpu": float(cpu[longest]),
         "over2": int((wall > 2.0).sum()),
         "over5": int((wall > 5.0).sum()),
         "overruns": overruns,
         "planning_s": received if received is not None else float("nan"),
-        "decided_s": decided,
+        "loop_s": loop_s,
         "phase": outcome,
     }
 
@@ -247,6 +271,7 @@ def main() -> None:
     parser.add_argument("--nice", type=int, default=None, help=f"worker niceness ({planning_worker.NICE})")
     parser.add_argument("--no-reference", action="store_true", help="skip the in-process reference")
     parser.add_argument("--host-robot", action="store_true", help="the host drives its own robot (HostRobot)")
+    parser.add_argument("--rt", type=int, default=0, metavar="P", help="loop thread at SCHED_FIFO priority P")
     parser.add_argument(
         "--wait-quiet",
         type=float,
@@ -264,6 +289,7 @@ def main() -> None:
         f"{'the host drives its own robot (HostRobot)' if args.host_robot else 'the bundled simulation'}"
     )
     head = f"{'Hz':>4}{'ticks':>7}{'p50 ms':>8}{'p99 ms':>8}{'max ms':>8}{'its cpu':>8}{'>2ms':>6}{'>5ms':>6}"
+    head += f"{'tree p99':>9}"
     print(head + f"{'late':>6}{'worker s':>10}{'here s':>8}{'ratio':>7}  busy before, load")
     for rate in (float(r) for r in args.rates.split(",")):
         for _ in range(args.repeat):
@@ -272,11 +298,11 @@ def main() -> None:
             load_before = _load()
             here = float("nan") if args.no_reference else reference(scenario)
             busy.append(wait_quiet(quiet) if quiet is not None else _busy(1.0))
-            run = host_loop(scenario, rate, args.host_robot)
+            run = host_loop(scenario, rate, args.host_robot, args.rt)
             ratio = run["planning_s"] / here
             print(
                 f"{rate:>4.0f}{run['ticks']:>7}{run['p50']:>8.2f}{run['p99']:>8.2f}{run['longest']:>8.2f}"
-                f"{run['longest_cpu']:>8.2f}{run['over2']:>6}{run['over5']:>6}{run['overruns']:>6}"
+                f"{run['longest_cpu']:>8.2f}{run['over2']:>6}{run['over5']:>6}{run['tree_p99']:>9.2f}{run['overruns']:>6}"
                 f"{run['planning_s']:>10.2f}{here:>8.2f}{ratio:>7.2f}  "
                 f"{busy[0]:.0%} {busy[1]:.0%}, {load_before}->{_load()}",
                 flush=True,
