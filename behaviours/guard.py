@@ -65,6 +65,7 @@ class RiskGuard(py_trees.decorators.Decorator):
         self.bb.register_key("robot", access=py_trees.common.Access.READ)
         self.bb.register_key(LIVE_RISK_KEY, access=py_trees.common.Access.READ)
         self._allow: frozenset[tuple[str, str]] | None = None
+        self._allow_of: tuple[Any, frozenset[tuple[str, str]]] | None = None  # (monitor, its allow)
         self._ticks = 0
         self._watch: Any = None  # the monitor of the running motion (set in initialise)
         self._robot: Any = None
@@ -75,12 +76,14 @@ class RiskGuard(py_trees.decorators.Decorator):
         return self.bb.get(LIVE_RISK_KEY) if self.bb.exists(LIVE_RISK_KEY) else None
 
     def allow(self, monitor: Any) -> frozenset[tuple[str, str]]:
-        """The pairs this motion may bring into contact (the monitor's collision model names them)."""
-        return frozenset(
-            monitor.collision.step_allow(
+        """The pairs this motion may bring into contact (the monitor's collision model names them;
+        worked out once per monitor)."""
+        if self._allow_of is None or self._allow_of[0] is not monitor:
+            pairs = monitor.collision.step_allow(
                 self.side, self.kind, self.obj, self.allow_contact, self.motion.trajectory.carried
             )
-        )
+            self._allow_of = (monitor, frozenset(pairs))
+        return self._allow_of[1]
 
     def prepare(self, monitor: Any) -> None:
         """Let ``monitor`` compute the planned knots' distances ahead (e.g. in a planning thread),

@@ -52,7 +52,7 @@ import mujoco
 import numpy as np
 import py_trees
 
-from behaviours.guard import LIVE_RISK_KEY
+from behaviours.guard import LIVE_RISK_KEY, RiskGuard
 from behaviours.robot_access import NAMESPACE
 from executive.decision.approval import AlternativeRisk as RequestRow
 from executive.decision.approval import ApprovalChannel, ApprovalDecision, ApprovalRequest, PendingApproval
@@ -397,7 +397,15 @@ class RiskSelector(py_trees.composites.Composite):
         best = feasible[0].plan if feasible else None
         if monitor is not None and best is not None:
             pieces += [functools.partial(self._adopt, monitor, best, knots) for knots in result.knots]
+            pieces.append(functools.partial(self._prime_guards, monitor, feasible[0].name))
         return pieces
+
+    def _prime_guards(self, monitor: Any, name: str) -> None:
+        """Have the guards of ``name``'s subtree work out their allowed contacts now (each motion's
+        first tick would)."""
+        for node in self._built[name].iterate():
+            if isinstance(node, RiskGuard):
+                node.allow(monitor)
 
     def _build(self, alt: AlternativeRisk) -> None:
         """Build ``alt``'s subtree (kept for the decision)."""
