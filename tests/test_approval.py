@@ -323,7 +323,10 @@ def test_executive_run_prompts_on_a_terminal_and_the_operator_aborts(tmp_path: P
     cmd = [str(script)] if script.exists() else [sys.executable, "-m", "executive.cli.main"]
     out = tmp_path / "run"
     env = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl"), "TERM": "xterm"}
-    term = Terminal([*cmd, "run", str(risky), "--approve", "prompt", "--exact", "--out", str(out)], env=env)
+    term = Terminal(
+        [*cmd, "run", str(risky), "--approve", "prompt", "--exact", "--rollouts", "0", "--out", str(out)],
+        env=env,
+    )
     try:
         term.expect("abort [q] > ", timeout=300)
         assert "left_to_right" in term.screen and "APPROVAL NEEDED" in term.screen

@@ -116,7 +116,18 @@ def test_deny_above_threshold_aborts_without_moving_the_arms(tmp_path: Path) -> 
 def test_cli_deny_exits_1_and_auto_runs_with_an_approval_record(tmp_path: Path) -> None:
     risky = _risky_scenario(tmp_path)
     deny = subprocess.run(
-        [*CMD, "run", str(risky), "--approve", "deny", "--exact", "--out", str(tmp_path / "deny")],
+        [
+            *CMD,
+            "run",
+            str(risky),
+            "--approve",
+            "deny",
+            "--exact",
+            "--rollouts",
+            "0",
+            "--out",
+            str(tmp_path / "deny"),
+        ],
         capture_output=True,
         text=True,
         timeout=600,
@@ -126,7 +137,18 @@ def test_cli_deny_exits_1_and_auto_runs_with_an_approval_record(tmp_path: Path) 
     assert json.loads((tmp_path / "deny" / "summary.json").read_text())["outcome"] == "aborted"
 
     auto = subprocess.run(
-        [*CMD, "run", str(risky), "--approve", "auto", "--exact", "--out", str(tmp_path / "auto")],
+        [
+            *CMD,
+            "run",
+            str(risky),
+            "--approve",
+            "auto",
+            "--exact",
+            "--rollouts",
+            "0",
+            "--out",
+            str(tmp_path / "auto"),
+        ],
         capture_output=True,
         text=True,
         timeout=600,
@@ -182,7 +204,7 @@ def test_the_gate_refuses_to_execute_above_threshold_without_approval(tmp_path: 
 def test_a_killed_run_leaves_only_complete_json_lines(tmp_path: Path) -> None:
     out = tmp_path / "killed"
     proc = subprocess.Popen(
-        [*CMD, "run", "book_transfer", "--approve", "auto", "--exact", "--out", str(out)],
+        [*CMD, "run", "book_transfer", "--approve", "auto", "--exact", "--rollouts", "0", "--out", str(out)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
         env=ENV,
