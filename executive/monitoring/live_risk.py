@@ -259,7 +259,6 @@ class LiveRiskMonitor:
         # views into the model's own arrays (read afresh on each check through the views)
         self._geometry_arrays = (m.body_pos, m.body_quat, m.geom_pos, m.geom_quat, m.geom_size)
         self._geometry = self._geometry_key()
-        self.collision.warm()  # every pair's distance functor now, not in a guarded motion's tick
         self.knots_computed = 0  # planned knots whose distance was computed (not memoised)
         self.knots_adopted = 0  # planned knots whose distance another monitor computed (adopt)
         # The measured configuration's distance: the last exact one per (carried, allow), with

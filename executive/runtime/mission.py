@@ -205,6 +205,8 @@ class Executive:
         self.root = py_trees.composites.Sequence(name=sc.name, memory=True, children=list(self.selectors))
         self.tree = py_trees.trees.BehaviourTree(self.root)
         self.monitor = LiveRiskMonitor(self.estimate, sc.risk.guard) if guard else None
+        if self.monitor is not None:  # every pair's distance functor now, not in the ticks of a swap
+            self.monitor.collision.warm()
         self.pace_waiting = pace_waiting
         self.ticks = 0
         self.max_tick_s = 0.0  # longest tree tick (physics excluded), s
