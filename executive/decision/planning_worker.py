@@ -1,42 +1,18 @@
 """The planning worker: one warm process that does the selectors' heavy work, off the ticking process.
 
-Python threads share one interpreter lock, so planning in a thread of the process that ticks
-delays its ticks (a tick waits for the lock up to the interpreter's switch interval, and
-longer while the planner keeps taking it back). A :class:`PlanningWorker` runs the work of
-:mod:`executive.decision.planning_job` in a process of its own instead: spawned once (clean:
-no inherited MuJoCo state), it builds the scenario's estimate world, a live risk monitor and a
-physics check with its own warm rollout processes, and then serves jobs. A selector
-:meth:`~PlanningWorker.submit` s a :class:`~executive.decision.planning_job.PlanningJob` (a few
-kB of plain data) and :meth:`~PlanningWorker.poll` s for the result on later ticks; a thread of
-the ticking process receives it (it waits in ``read``, without the lock, and unpickles the
-arrays), so a tick only takes it.
+Planning in a thread of the process that ticks would hold the interpreter lock the ticks need. A
+:class:`PlanningWorker` runs :mod:`executive.decision.planning_job` in a spawned process of its
+own, with its own estimate world, live risk monitor and warm rollout processes, at a lower
+priority (:data:`NICE`). A selector :meth:`~PlanningWorker.submit` s a job (plain data) and
+:meth:`~PlanningWorker.poll` s on later ticks; a receiving thread unpickles the result, so a poll
+only takes it.
 
-The worker runs at a lower priority (``nice``, default :data:`NICE`; its rollout processes
-inherit it): the ticking process gets the cores first when it wakes.
-
-Faults are noticed by the process that ticks, on its next :meth:`~PlanningWorker.poll`:
-
-* the worker died (its exit code, e.g. killed by SIGKILL): at once;
-* the worker hangs: a thread in the worker writes a heartbeat (a shared double, the
-  monotonic clock) every :data:`BEAT_S`; a heartbeat older than :data:`HANG_S` is a hang. The
-  thread is not the job: a plan that takes long (a G1's several seconds) keeps beating. Before
-  the worker's first heartbeat (it is importing) the limit is :data:`START_S`.
-  The heartbeat thread needs the interpreter lock, which the job's threads hold while they
-  compute; on a loaded machine the scheduler may leave the holder without a core for most of
-  a second (docs/workers.md), and no beat is written. So a stale heartbeat is a hang only if the process is
-  stopped, or has used no CPU time meanwhile and none of its threads waits for a core
-  (Linux's ``/proc/<pid>/task/*/stat``; elsewhere the heartbeat alone decides);
-* a job runs past its deadline (:data:`JOB_S` plus the scenario's rollout budget): a job stuck in
-  an endless loop keeps beating, so this is how it is noticed.
-
-``poll`` then raises :class:`WorkerLost` (its reason says which); :meth:`~PlanningWorker.replace`
-kills the old process (a hung one too) and starts a fresh one, and the job is submitted again.
-A rollout process whose planning worker died exits by itself
-(:func:`executive.decision.physics_check.exit_with_parent`).
-
-A worker closed while healthy and idle is kept warm (at most :data:`KEEP_IDLE` per process, with
-their rollout processes): the next :class:`PlanningWorker` of this process takes it and has it
-build the new scenario's world, instead of spawning a process and importing everything again.
+A poll raises :class:`WorkerLost` when the worker died (its exit code), hangs (no heartbeat
+for :data:`HANG_S` while it uses no CPU, or it is stopped), or a job has run past its deadline
+(:data:`JOB_S` plus the scenario's rollout budget: an endless loop keeps beating);
+:meth:`~PlanningWorker.replace` starts a fresh one. A healthy idle worker that is closed is kept
+warm (at most :data:`KEEP_IDLE`) for this process's next :class:`PlanningWorker`, which gives it
+its scenario. docs/workers.md has the design and the measurements.
 """
 
 from __future__ import annotations
