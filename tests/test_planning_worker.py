@@ -162,6 +162,31 @@ def test_a_job_past_its_deadline_is_a_hang_though_the_worker_beats() -> None:
     assert 0.3 < noticed < 0.6
 
 
+def test_a_forked_child_does_not_take_its_parents_idle_worker() -> None:
+    """A worker kept warm belongs to the process that started it: a child forked after (a host
+    that forks, the kill tests here) starts its own worker instead of writing to the parent's pipe."""
+    scenario = load("book_transfer")
+    parked = PlanningWorker(scenario, jobs=0, nice=4)  # a key of its own: this test's worker
+    assert parked.wait_ready(120.0)
+    parked.close()  # idle and healthy: kept warm
+    pid = os.fork()
+    if pid == 0:  # the child: a worker of its own, not the parent's
+        code = 1
+        try:
+            mine = PlanningWorker(scenario, jobs=0, nice=4)
+            code = 0 if mine.pid != parked.pid and mine.wait_ready(120.0) else 2
+            mine.close(wait=True)
+        finally:
+            os._exit(code)
+    _, status = os.waitpid(pid, 0)
+    again = PlanningWorker(scenario, jobs=0, nice=4)  # the parent still has it
+    try:
+        assert os.waitstatus_to_exitcode(status) == 0
+        assert again.pid == parked.pid and again.wait_ready(120.0)
+    finally:
+        again.close(wait=True)
+
+
 def _gone(pid: int, within_s: float = 5.0) -> bool:
     """Whether process ``pid`` has ended (or is a zombie) within ``within_s``."""
     deadline = time.monotonic() + within_s

@@ -267,6 +267,10 @@ class _Idle:
             return None
         return found[-1]
 
+    def forget(self) -> None:
+        """Drop the list without stopping anything: in a forked child, whose parent owns them."""
+        self.workers, self.lock = [], threading.Lock()
+
     def close(self) -> None:
         """Stop every idle worker; none is kept from now on (the interpreter is exiting)."""
         self.exiting = True
@@ -277,6 +281,7 @@ class _Idle:
 
 
 _IDLE = _Idle()
+os.register_at_fork(after_in_child=_IDLE.forget)  # a forked child must not take its parent's workers
 # At the interpreter's exit, before the workers' own finalizers (priority 10) and the join of its children.
 multiprocessing.util.Finalize(None, _IDLE.close, exitpriority=11)
 
