@@ -353,7 +353,8 @@ def test_kill_9_at_random_moments_leaves_whole_lines_and_whole_summaries(tmp_pat
     assert os.waitstatus_to_exitcode(status) == 0
     assert _one_run(tmp_path / "reference")[-1]["kind"] == "end"
     rng = random.Random(15)
-    moments = sorted(rng.uniform(0.0, whole_s * 1.05) for _ in range(12))
+    kills = 6  # one at a random moment in each sixth of the run (and a little after it)
+    moments = [whole_s * 1.05 * (i + rng.random()) / kills for i in range(kills)]
     seen: list[int] = []
     cut_mid_run = 0
     for i, moment in enumerate(moments):
