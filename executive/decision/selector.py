@@ -15,25 +15,25 @@ robot holds) while it plans, and keep their period. It then:
 3. ticks the chosen child. If it fails, the selector re-plans from the current
    state (the robot's measured joints, the objects where the robot now observes
    them) without the alternatives already tried, and goes on with the next.
+   A fall or unstable simulation ends the task at once: nothing is re-tried on a
+   robot that may not be standing.
 
 The estimate follows the objects (:mod:`executive.world.observation`): the selector looks
 through the robot and updates the estimate after every failure (``after_failure``; a re-plan
 that follows at once starts from that look), before a re-plan an operator asked for
 (``before_replan``) and when its task ends after acting (``after_task``, unless it has just
 looked), each time with an ``observation`` line in the log.
-   A fall or unstable simulation ends the task at once: nothing is re-tried on a
-   robot that may not be standing.
 
 The worker process does all the heavy work of a decision
 (:class:`executive.decision.planning_job.Planning`): it plans and assesses, dry-runs and
 rolls out in physics, and computes the planned distances of the lowest-risk alternative's
 guarded motions. What comes back is plain data (plans as arrays); the ticks that follow
-log it, build one subtree per tick from the plans, hand the prepared distances to the live
-risk monitor (``/executive/live_risk``, if any), then rank, select and swap the subtrees in;
-the chosen one is ticked from the next tick on (docs/workers.md). A worker that dies or hangs
-is logged (``planning_worker``) and replaced, and the task re-plans from where the robot
-holds. ``background=False`` does the same work inside the tick instead (blocking: for batch
-use and tests).
+take it in a piece a tick (:meth:`RiskSelector._swap_pieces`: its log lines, one subtree,
+one guarded motion's prepared distances for the live risk monitor ``/executive/live_risk``),
+then rank, select and swap the subtrees in; the chosen one is ticked from the next tick on.
+A worker that dies or hangs is logged (``planning_worker``) and replaced, and the task
+re-plans from where the robot holds. ``background=False`` does the same work inside the
+tick instead (blocking: for batch use and tests).
 
 Every step is a line in the audit log (:class:`executive.decision.audit.AuditLog`) before
 it is acted on; no alternative above the threshold starts without an approval
