@@ -44,19 +44,15 @@ from __future__ import annotations
 import argparse
 import os
 import time
-from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-import mujoco
 import numpy as np
 
 import executive.decision.planning_worker as planning_worker
-from behaviours.gripper import object_contacts
 from executive.decision.physics_check import PhysicsCheck, with_rollouts
 from executive.decision.planning_job import EstimateState, Planning, PlanningJob
-from executive.execution.robot_interface import HostRobot, JointState
-from executive.execution.simulated import SimulatedRobot
+from executive.execution.robot_interface import HostRobot, SimulatedJointIO
 from executive.monitoring.live_risk import LiveRiskMonitor
 from executive.runtime.mission import Executive, freeze_startup_heap
 from executive.scenario import load
@@ -135,45 +131,6 @@ def _settled(pid: int, quiet_s: float = 0.5, timeout_s: float = 60.0) -> None:
             last, since = now, time.monotonic()
 
 
-class Hardware:
-    """A host's robot for ``--host-robot``: a world of the scenario the host steps itself through its
-    own servo loop, behind the :class:`executive.execution.robot_interface.JointIO` protocol."""
-
-    def __init__(self, scenario: Scenario, control_dt: float) -> None:
-        self.world = build(scenario)
-        self.servo = SimulatedRobot(self.world, control_dt=control_dt)
-        model = self.world.model
-        self.joints = {
-            model.joint(j).name: int(model.jnt_qposadr[j])
-            for j in range(model.njnt)
-            if model.joint(j).name
-            and model.jnt_bodyid[j] in self.world.ids.robot_bodies
-            and model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE
-        }
-        self.base = int(model.jnt_qposadr[model.body_jntadr[self.world.ids.base_body]])
-
-    def read(self) -> JointState:
-        qpos = self.world.data.qpos
-        objects = {name: self.world.object_pose(name) for name in self.world.ids.object_bodies}
-        base = self.base
-        position = (float(qpos[base]), float(qpos[base + 1]), float(qpos[base + 2]))
-        quat = (float(qpos[base + 3]), float(qpos[base + 4]), float(qpos[base + 5]), float(qpos[base + 6]))
-        joints = {name: float(qpos[adr]) for name, adr in self.joints.items()}
-        return JointState(float(self.world.data.time), joints, position, quat, objects)
-
-    def send_joint_targets(self, targets: Mapping[str, float]) -> None:
-        q = self.servo.q_target.copy()
-        for name, value in targets.items():
-            q[self.joints[name]] = value
-        self.servo.set_joint_targets(q)
-
-    def send_gripper(self, side: str, closed: bool) -> None:
-        self.servo.set_gripper(side, closed)
-
-    def hand_contacts(self, side: str, obj: str) -> tuple[int, float]:
-        return object_contacts(self.servo, side, obj)
-
-
 #: Ticks of the chosen alternative in the loop (its motion's set-up is part of the swap).
 CHOSEN_TICKS = 10
 
@@ -181,12 +138,12 @@ CHOSEN_TICKS = 10
 def host_loop(scenario: Scenario, rate: float, host_robot: bool = False, rt: int = 0) -> dict[str, Any]:
     """The host's loop around tick() through the first decision (module docstring, 2).
 
-    ``host_robot``: the host drives its own robot (:class:`Hardware` behind a ``HostRobot``): it
+    ``host_robot``: the host drives its own robot (``SimulatedJointIO`` behind a ``HostRobot``): it
     syncs the robot before each tick and steps it after; only ``tick()`` is timed. ``rt``: the loop
     thread's SCHED_FIFO priority (0: the normal policy).
     """
     period = 1.0 / rate
-    hardware = Hardware(scenario, period) if host_robot else None
+    hardware = SimulatedJointIO(build(scenario), period) if host_robot else None
     robot = HostRobot(build(scenario), hardware, control_dt=period) if hardware is not None else None
     executive = Executive(
         scenario,

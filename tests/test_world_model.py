@@ -27,7 +27,7 @@ from executive.decision.assessment import assess_task
 from executive.decision.audit import now_iso
 from executive.decision.physics_check import with_rollouts
 from executive.errors import ExecutiveError
-from executive.execution.robot_interface import HostRobot, JointState
+from executive.execution.robot_interface import HostRobot, JointState, joint_state
 from executive.execution.simulated import SimulatedRobot
 from executive.planning.planner import Planner
 from executive.runtime.mission import Executive
@@ -247,24 +247,7 @@ def test_a_host_robot_supplies_what_it_sees() -> None:
             self.objects: dict[str, tuple[np.ndarray, np.ndarray]] = {"book": seen}
 
         def read(self) -> JointState:
-            world = build(scenario)
-            qpos = world.data.qpos
-            joints = {
-                world.model.joint(j).name: float(qpos[world.model.jnt_qposadr[j]])
-                for j in range(world.model.njnt)
-                if world.model.joint(j).name
-                and world.model.jnt_bodyid[j] in world.ids.robot_bodies
-                and world.model.jnt_type[j] != 0
-            }
-            base = int(world.model.jnt_qposadr[world.model.body_jntadr[world.ids.base_body]])
-            position = (float(qpos[base]), float(qpos[base + 1]), float(qpos[base + 2]))
-            quat = (
-                float(qpos[base + 3]),
-                float(qpos[base + 4]),
-                float(qpos[base + 5]),
-                float(qpos[base + 6]),
-            )
-            return JointState(1.5, joints, position, quat, self.objects)
+            return joint_state(build(scenario), time=1.5, objects=self.objects)
 
         def send_joint_targets(self, targets: Mapping[str, float]) -> None: ...
 

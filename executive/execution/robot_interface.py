@@ -34,9 +34,20 @@ from numpy.typing import NDArray
 
 from executive.errors import ExecutiveError
 from executive.monitoring.detectors import Failure, FailureDetector
+from executive.world import touch
 from executive.world.model import World
 
-__all__ = ["HostRobot", "JointIO", "JointState", "ObservingRobot", "RobotInterface"]
+__all__ = [
+    "HostRobot",
+    "JointIO",
+    "JointState",
+    "ObservingRobot",
+    "RobotInterface",
+    "SimulatedJointIO",
+    "base_address",
+    "joint_addresses",
+    "joint_state",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -92,6 +103,85 @@ class JointState:
     objects: Mapping[str, tuple[FloatArray, FloatArray]] = field(default_factory=dict)  # name -> pos, quat
 
 
+def joint_addresses(world: World) -> dict[str, int]:
+    """The robot's named joints (its base's free joint left out): name -> their ``qpos`` address."""
+    model = world.model
+    return {
+        model.joint(j).name: int(model.jnt_qposadr[j])
+        for j in range(model.njnt)
+        if model.joint(j).name
+        and model.jnt_bodyid[j] in world.ids.robot_bodies
+        and model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE
+    }
+
+
+def base_address(world: World) -> int:
+    """The ``qpos`` address of the robot base's free joint (position, then w x y z quaternion).
+
+    Raises:
+        ExecutiveError: the robot's base body has no free joint (it cannot be mirrored).
+    """
+    model = world.model
+    base_joint = next((j for j in range(model.njnt) if model.jnt_bodyid[j] == world.ids.base_body), None)
+    if base_joint is None or model.jnt_type[base_joint] != mujoco.mjtJoint.mjJNT_FREE:
+        raise ExecutiveError("HostRobot needs a robot whose base body has a free joint")
+    return int(model.jnt_qposadr[base_joint])
+
+
+def joint_state(
+    world: World,
+    time: float | None = None,
+    objects: Mapping[str, tuple[FloatArray, FloatArray]] | None = None,
+) -> JointState:
+    """What a robot in ``world``'s state would report: its joints and base pose.
+
+    Args:
+        time: the reading's time (None: the world's simulated time).
+        objects: the objects it sees (None: none).
+    """
+    qpos, base = world.data.qpos, base_address(world)
+    return JointState(
+        float(world.data.time) if time is None else time,
+        {name: float(qpos[adr]) for name, adr in joint_addresses(world).items()},
+        (float(qpos[base]), float(qpos[base + 1]), float(qpos[base + 2])),
+        (float(qpos[base + 3]), float(qpos[base + 4]), float(qpos[base + 5]), float(qpos[base + 6])),
+        dict(objects or {}),
+    )
+
+
+class SimulatedJointIO:
+    """A :class:`JointIO` over a simulated robot the host steps itself (``servo.advance()`` once a
+    control period): a stand-in for the host's hardware when testing or timing a host's loop.
+
+    Args:
+        world: the robot's world (a world of the scenario, its own instance).
+        control_dt: the servo's control period (s).
+    """
+
+    def __init__(self, world: World, control_dt: float) -> None:
+        from executive.execution.simulated import SimulatedRobot
+
+        self.world = world
+        self.servo = SimulatedRobot(world, control_dt=control_dt)
+        self.joints = joint_addresses(world)
+
+    def read(self) -> JointState:
+        objects = {name: self.world.object_pose(name) for name in self.world.ids.object_bodies}
+        return joint_state(self.world, objects=objects)
+
+    def send_joint_targets(self, targets: Mapping[str, float]) -> None:
+        q = self.servo.q_target.copy()
+        for name, value in targets.items():
+            q[self.joints[name]] = value
+        self.servo.set_joint_targets(q)
+
+    def send_gripper(self, side: str, closed: bool) -> None:
+        self.servo.set_gripper(side, closed)
+
+    def hand_contacts(self, side: str, obj: str) -> tuple[int, float]:
+        return touch.hand_contacts(self.world, side, obj)  # the simulated fingertips' sensing
+
+
 class JointIO(Protocol):
     """The host's side: read the robot, send it targets."""
 
@@ -117,17 +207,8 @@ class HostRobot:
         self.world, self.io, self.control_dt = world, io, control_dt
         self.model, self.data = world.model, world.data
         self.detector = FailureDetector(world)
-        model = self.model
-        self._joints: dict[str, int] = {}
-        for j in range(model.njnt):
-            name = model.joint(j).name
-            body = model.jnt_bodyid[j]
-            if name and body in world.ids.robot_bodies and model.jnt_type[j] != mujoco.mjtJoint.mjJNT_FREE:
-                self._joints[name] = int(model.jnt_qposadr[j])
-        base_joint = next((j for j in range(model.njnt) if model.jnt_bodyid[j] == world.ids.base_body), None)
-        if base_joint is None or model.jnt_type[base_joint] != mujoco.mjtJoint.mjJNT_FREE:
-            raise ExecutiveError("HostRobot needs a robot whose base body has a free joint")
-        self._base = int(model.jnt_qposadr[base_joint])
+        self._joints = joint_addresses(world)
+        self._base = base_address(world)
         self._time = 0.0
         self._seen: dict[str, tuple[FloatArray, FloatArray]] = {}
         self.q_target: FloatArray = self.data.qpos.copy()
