@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 from executive.cli import replay as replay_command
 from executive.cli import tree as tree_command
 from executive.cli.output_paths import check_file, check_folder
+from executive.console import PORT
 from executive.errors import ExecutiveError
 from executive.schema import catalog as registry
 from executive.schema.types import Scenario
@@ -479,7 +480,7 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="the operator's console: a page on 127.0.0.1 showing the run live, approvals answered there "
         '(pip install ".[console]")',
     )
-    p.add_argument("--console-port", type=_PORT, default=8080, help="the console's port (default 8080)")
+    p.add_argument("--console-port", type=_PORT, default=PORT, help=f"the console's port (default {PORT})")
     p.set_defaults(func=_cmd_run)
 
 
@@ -537,7 +538,7 @@ def _add_console(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
         'planned and checked but not executed (pip install ".[console]")',
     )
     p.add_argument("target", help="a run folder, or " + _SCENARIO_HELP)
-    p.add_argument("--port", type=_PORT, default=8080, help="the page's port (default 8080)")
+    p.add_argument("--port", type=_PORT, default=PORT, help=f"the page's port (default {PORT})")
     p.set_defaults(func=_cmd_console)
 
 

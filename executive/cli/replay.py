@@ -15,6 +15,7 @@ import argparse
 from collections.abc import Callable
 
 from executive.cli.output_paths import check_file
+from executive.console import PORT
 from executive.errors import ExecutiveError
 
 __all__ = ["add_parser", "run"]
@@ -96,5 +97,5 @@ def add_parser(
         help="play it back on the operator's console (a page on 127.0.0.1 with a time slider; "
         'pip install ".[console]")',
     )
-    p.add_argument("--console-port", type=port, default=8080, help="the console's port (default 8080)")
+    p.add_argument("--console-port", type=port, default=PORT, help=f"the console's port (default {PORT})")
     p.set_defaults(func=run)

@@ -4,3 +4,6 @@ motion and risk, the approval request with its buttons, and the behaviour tree, 
 Optional: ``pip install ".[console]"``. Start it with ``executive run SCENARIO --console`` or
 ``executive console RUN_OR_SCENARIO``; from Python, :class:`executive.console.console.Console`.
 """
+
+#: The TCP port the console's page is served on unless told otherwise (on 127.0.0.1 only).
+PORT = 8080

@@ -28,6 +28,7 @@ import mujoco
 import numpy as np
 import py_trees
 
+from executive.console import PORT
 from executive.console.approval_panel import ApprovalPanel
 from executive.console.channel import ConsoleChannel
 from executive.console.ghost import GhostView, PlannedMotion
@@ -67,7 +68,7 @@ class Console:
     """
 
     def __init__(
-        self, port: int = 8080, *, title: str = "executive", rate_hz: float = 25.0, user: str | None = None
+        self, port: int = PORT, *, title: str = "executive", rate_hz: float = 25.0, user: str | None = None
     ) -> None:
         self.server = start_server(port, title=title)
         self.channel = ConsoleChannel(user)

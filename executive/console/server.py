@@ -16,6 +16,7 @@ import io
 from types import ModuleType
 from typing import TYPE_CHECKING
 
+from executive.console import PORT
 from executive.errors import ExecutiveError
 
 if TYPE_CHECKING:
@@ -43,7 +44,7 @@ def require_viser() -> ModuleType:
     return viser
 
 
-def start_server(port: int = 8080, *, title: str = "executive") -> viser.ViserServer:
+def start_server(port: int = PORT, *, title: str = "executive") -> viser.ViserServer:
     """A viser server on ``127.0.0.1:port`` (0: any free port; a busy port: viser takes the next free).
 
     Args:
