@@ -258,13 +258,11 @@ def test_a_sampled_truth_is_rebuilt_with_its_seed(tmp_path: Path, capsys: pytest
 
 def test_a_host_robot_run_records_what_the_host_reports(tmp_path: Path) -> None:
     """With a host's robot the frames are its measured state in the estimate's layout; no truth to rebuild."""
-    from test_host_robot import SimulatedHardware
-
-    from executive.execution.robot_interface import HostRobot
+    from executive.execution.robot_interface import HostRobot, SimulatedJointIO
     from executive.world.model import build
 
     scenario = with_rollouts(load("book_transfer"), 0)
-    hardware = SimulatedHardware(build(scenario), control_dt=0.02)
+    hardware = SimulatedJointIO(build(scenario), control_dt=0.02)
     robot = HostRobot(build(scenario), hardware, control_dt=0.02)
     executive = Executive(scenario, approval="deny", robot=robot, out=tmp_path / "run")
     seen = []
