@@ -182,8 +182,9 @@ class _Instance:
             if code < 0:
                 return f"died (killed by {signal.Signals(-code).name})"
             return f"exited with code {code}"
-        if self.unanswered and now - min(self.unanswered.values()) > job_s:
-            return f"hangs: a job has run for {now - min(self.unanswered.values()):.1f} s (limit {job_s:g} s)"
+        running = now - min(self.unanswered.values()) if self.unanswered else 0.0
+        if running > job_s:
+            return f"hangs: a job has run for {running:.1f} s (limit {job_s:g} s)"
         beat = self.beat.value
         if beat == 0.0:
             if now - self.started > START_S:
@@ -320,7 +321,7 @@ class PlanningWorker:
     """A warm process that does the selectors' planning, assessment and physics checks.
 
     Args:
-        scenario: the scenario whose estimate the worker builds (once per process).
+        scenario: the scenario whose estimate the worker builds.
         jobs: the physics check's rollout processes (``risk.rollouts.jobs``), started by the
             worker (0: the worker runs no physics check).
         nice: the worker's niceness increment (0: none; None: :data:`NICE`).
@@ -328,7 +329,8 @@ class PlanningWorker:
         job_s: a job running longer than this (s) is a hang (None: :data:`JOB_S` plus the
             scenario's rollout budget).
 
-    The process is spawned at once and builds its world while the caller goes on. Use
+    The process is spawned at once (or an idle one of this process is taken) and builds its world
+    while the caller goes on. Use
     :meth:`submit` and :meth:`poll` per job, :meth:`replace` after :class:`WorkerLost`,
     :meth:`close` at the end (also done when the interpreter exits, or this object is collected).
     """
