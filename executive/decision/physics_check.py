@@ -402,19 +402,21 @@ class RolloutPool:
         finish when they are ready). Workers already running are left alone (no futures)."""
         if self._pool is not None:
             return []
-        pool = self.start()
-        with normal_policy_children():
-            return [pool.submit(_warm_up) for _ in range(self.jobs)]
+        return self._submit([(_warm_up,)] * self.jobs)
 
     def __call__(self, jobs: Sequence[RolloutJob]) -> list[dict[str, Any]]:
-        pool = self.start()
         try:
-            with normal_policy_children():  # the pool spawns its processes as jobs are submitted
-                futures = [pool.submit(run_job, job) for job in jobs]
-            return [future.result() for future in futures]
+            return [future.result() for future in self._submit([(run_job, job) for job in jobs])]
         except concurrent.futures.process.BrokenProcessPool as exc:
             self.close()
             raise RolloutError(f"a physics worker process died: {exc}") from exc
+
+    def _submit(self, calls: Sequence[tuple[Any, ...]]) -> list[concurrent.futures.Future[Any]]:
+        """Submit each ``(function, *args)``; the pool spawns its processes as calls are submitted,
+        here at the normal policy whatever the calling thread's."""
+        pool = self.start()
+        with normal_policy_children():
+            return [pool.submit(*call) for call in calls]
 
     def close(self) -> None:
         if self._pool is not None:
