@@ -1,37 +1,14 @@
 """The run's per-tick record: the robot's state, the tree's statuses and the guards' values, every tick.
 
-A run folder (``executive run --out DIR``, ``Executive(out=DIR)``) keeps, besides
-``decisions.jsonl``, a folder ``record/`` written by :class:`TickRecorder` (an
-``Executive.tick_listeners`` entry) and read back by :func:`load_record`:
+A run folder (``executive run --out DIR``, ``Executive(out=DIR)``) gets a ``record/`` folder
+written by :class:`TickRecorder` (an ``Executive.tick_listeners`` entry): ``header.json`` (how to
+read the frames and rebuild the world), ``frames.bin`` (one fixed-size frame per tick: time,
+guard values, ``qpos``) and ``events.jsonl`` (tree, status and phase changes). Every frame and
+line is one unbuffered append, so a killed run keeps every tick before the kill; at most one cut
+frame or line at the end, which :func:`load_record` drops.
 
-* ``record/header.json``: what is needed to read and replay the frames: the scenario
-  (name, file), which world the frames are of (``world``: ``truth`` when the executive
-  simulated it, ``estimate`` for a host's robot) and how to rebuild it (``truth``:
-  ``"exact"`` or the seed of the sampled truth), ``nq``, the model's joints and each
-  object's free-joint qpos address, the control period and the frame layout (``dtype``).
-* ``record/frames.bin``: one fixed-size little-endian frame per tick, appended after the
-  tick and its physics step (and one before the first tick): ``tick`` (u4), ``time`` (robot
-  time, f8), ``wall`` (s since the recorder started, f4), ``clearance`` and ``com_margin`` (the
-  live guard's predicted least robot-environment distance and CoM margin, m, f4; NaN on a tick
-  without a guard check), ``guard`` (i2: the checking guard's node index, -1 none),
-  ``guard_ok`` (i1: 1 ok, 0 tripped, -1 no check) and ``qpos`` (nq x f4: the robot's and the
-  objects' free joints).
-* ``record/events.jsonl``: one JSON line per change, each with the ``frame`` it belongs to:
-  ``start``; ``tree`` (the nodes, each before its children (:func:`preorder`), as ``[name, class, parent]``,
-  whenever a selector swaps its alternatives in, followed by a full ``status``); ``status``
-  (``s``: ``[node, code]`` pairs of the nodes whose status changed, codes :data:`STATUS_CODES`);
-  ``phase`` (a task's selector entered ``planning``, ``awaiting_approval``, ``executing``,
-  ``done``, with the alternative it executes); ``end`` (the mission's status, at its last tick).
-
-Every frame and line is one unbuffered ``write`` to a file opened for appending, so a run
-killed at any point (SIGKILL included) leaves every tick before the kill in the files, at most
-one cut frame or line at the end, which :func:`load_record` drops. (The files are fsync'ed only
-when the mission ends: a power cut may lose the last seconds the OS had not written.)
-
-Reading: ``record = load_record(run_dir)`` gives a :class:`Record` with arrays per frame
-(``ticks``, ``times``, ``qpos``, ``clearance``, ``com_margin``, ...), ``object_pose(frame,
-name)``, ``frame_at(time)``, ``statuses_at(frame)`` (every node of the tree at that frame with
-its status) and ``phases``; see :class:`Record`.
+Reading: ``record = load_record(run_dir)`` gives a :class:`Record` (arrays per frame,
+``object_pose``, ``frame_at``, ``statuses_at``, ``phases``). docs/replay.md has the file format.
 """
 
 from __future__ import annotations
