@@ -1,27 +1,15 @@
 """The mission's behaviour tree as a run builds it, with every alternative's subtree, for display.
 
-``executive run`` ticks a Sequence (named after the scenario) of one
-:class:`executive.decision.selector.RiskSelector` per task; a selector gets its
-alternatives' subtrees as children only once its planning thread has planned them. A
-subtree's shape comes from the task kind's steps alone (:meth:`TaskKind.steps`, hand targets
-on the estimate, no IK): the planned trajectories are only handed to the motion behaviours.
-:func:`mission_tree` therefore lays out each alternative's steps and builds its subtree with
-the kind's own :meth:`TaskKind.subtree` on a stand-in trajectory per motion step (one knot
-at the robot's home pose, the step's name), without planning or physics. A kind whose
-subtree cannot be built that way is planned for real (the whole-body planner, no physics)
-and said so in :attr:`MissionTree.notes`. The alternatives are in the task's order; a run
-puts them in its risk ranking's order and leaves out those it found infeasible.
+:func:`mission_tree` lays out each alternative's steps (:meth:`TaskKind.steps`, no IK) and builds
+its subtree with the kind's own :meth:`TaskKind.subtree` on a stand-in trajectory per motion step,
+without planning or physics; a kind whose subtree cannot be built that way is planned (no
+physics), said so in :attr:`MissionTree.notes`. A later task is laid out with the hands holding
+what the earlier tasks leave, the objects where the scene starts them: where a run differs is in
+docs/replay.md. Alternatives come in the task's order (a run ranks them by risk and leaves out
+the infeasible).
 
-A task after the first starts, in a run, from what the earlier ones left: its alternatives are
-laid out here with the hands holding what the earlier tasks' steps leave in them (a ``place``
-after a ``pick``: each hand the pick's alternatives may leave holding the object), but with the
-objects where the scene starts them. A kind whose steps depend on where an earlier task left
-an object (the carry lane of a place, the strokes of a push) can then show a step more or less
-than the run will (docs/replay.md).
-
-Display it with py_trees' own renderers: :func:`text` (``py_trees.display.unicode_tree`` or
-``ascii_tree``), :func:`dot_source` (``py_trees.display.dot_tree``, pydot) and
-:func:`write_svg` (Graphviz's ``dot`` program).
+Display it with :func:`text` (``py_trees.display.unicode_tree`` or ``ascii_tree``),
+:func:`dot_source` (``py_trees.display.dot_tree``) and :func:`write_svg` (Graphviz's ``dot``).
 """
 
 from __future__ import annotations
