@@ -120,8 +120,7 @@ def test_a_stopped_worker_is_noticed_within_a_second_and_a_long_job_is_not() -> 
         os.kill(hung, signal.SIGSTOP)
         stopped = time.monotonic()
         with pytest.raises(WorkerLost) as lost:
-            while worker.poll(ticket) is None:
-                time.sleep(0.01)
+            _wait(worker, ticket)
         noticed = time.monotonic() - stopped
         print(f"noticed after {noticed:.2f} s: {lost.value}")
         assert "hangs: stopped" in lost.value.reason and lost.value.pid == hung
@@ -129,12 +128,10 @@ def test_a_stopped_worker_is_noticed_within_a_second_and_a_long_job_is_not() -> 
         fresh = worker.replace()
         assert fresh != hung
         ticket = worker.submit(job)
-        result = None
-        while result is None:
-            result = worker.poll(ticket)  # raises WorkerLost if the long job were taken for a hang
-            time.sleep(0.01)
+        result = _wait(worker, ticket)  # raises WorkerLost if the long job were taken for a hang
     finally:
         worker.close(wait=True)
+    assert result is not None
     print(f"the fresh worker's job took {result.work_s:.2f} s")
     assert result.failure is None and result.pid == fresh and result.verdict is not None
     assert result.work_s > HANG_S
