@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import os
 import sys
+import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -20,6 +21,7 @@ from executive.cli.output_paths import check_file, check_folder
 from executive.console import PORT
 from executive.errors import ExecutiveError
 from executive.schema import catalog as registry
+from executive.schema.failure_modes import ScenarioDeprecationWarning
 from executive.schema.types import Scenario
 from executive.world.model import World, build
 
@@ -542,9 +544,23 @@ def _add_console(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
     p.set_defaults(func=_cmd_console)
 
 
+def _show_scenario_warning(command: str) -> Callable[..., None]:
+    """``warnings.showwarning`` that prints a scenario's deprecation as one line (no source line)."""
+    default = warnings.showwarning
+
+    def show(message: Warning | str, category: type[Warning], *rest: object, **kw: object) -> None:
+        if issubclass(category, ScenarioDeprecationWarning):
+            print(f"executive {command}: warning: {message}", file=sys.stderr)
+        else:
+            default(message, category, *rest, **kw)  # type: ignore[arg-type]
+
+    return show
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the console script; returns the exit code."""
     args = _parser().parse_args(argv)
+    warnings.showwarning = _show_scenario_warning(args.command)
     func: Callable[[argparse.Namespace], int] = args.func
     try:
         return func(args)

@@ -17,6 +17,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from executive.errors import ExecutiveError
+from executive.risk.orderings import ordering as ordering_named
 from executive.risk.report import RiskReport
 from executive.schema.types import RiskConfig
 
@@ -44,16 +45,8 @@ class CombinedRisk:
     expected_loss: float = 0.0
 
     def value(self, ordering: str) -> float:
-        """The quantity the selector ranks by: weighted_sum, probability or expected_loss."""
-        if ordering == "weighted_sum":
-            return self.weighted_sum
-        if ordering == "probability":
-            return self.probability
-        if ordering == "expected_loss":
-            return self.expected_loss
-        raise ExecutiveError(
-            f"unknown ordering '{ordering}'; valid: weighted_sum, probability, expected_loss"
-        )
+        """The quantity the selector ranks by: the named ordering's (:mod:`executive.risk.orderings`)."""
+        return ordering_named(ordering).value(self)
 
     def as_dict(self) -> dict[str, float]:
         out = {mode: r.probability for mode, r in self.components.items()}

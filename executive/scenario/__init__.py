@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-__all__ = ["APPROVAL_MODES", "ORDERINGS", "from_dict", "load", "loads", "max_ordering_value"]
+__all__ = ["APPROVAL_MODES", "from_dict", "load", "loads", "max_ordering_value"]
 
 
 def __getattr__(name: str) -> Any:

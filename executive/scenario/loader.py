@@ -24,12 +24,15 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import TypeVar
 
+from executive.risk.orderings import ordering as ordering_named
+from executive.risk.orderings import ordering_names
 from executive.robot.model import BODY_PART_LABELS, RobotFacts, robot_facts
 from executive.robot.profile import load_profile
 from executive.robot.profile_types import RobotProfile
 from executive.scenario.checks import check_scene
 from executive.schema import catalog as registry
 from executive.schema import ranges as R
+from executive.schema.failure_modes import canonical_mode, mode_names
 from executive.schema.readers import read_scene
 from executive.schema.types import (
     ApprovalConfig,
@@ -46,6 +49,7 @@ from executive.schema.types import (
     Severity,
     TrialsConfig,
     Uncertainty,
+    default_weights,
 )
 from executive.schema.yaml_nodes import (
     Node,
@@ -58,14 +62,10 @@ from executive.schema.yaml_nodes import (
 )
 from executive.tasks.base import Task
 
-__all__ = ["APPROVAL_MODES", "ORDERINGS", "from_dict", "load", "loads", "max_ordering_value"]
+__all__ = ["APPROVAL_MODES", "from_dict", "load", "loads", "max_ordering_value"]
 
-#: How the selector ranks alternatives.
-ORDERINGS: tuple[str, ...] = ("weighted_sum", "probability", "expected_loss")
 #: How an approval request is answered when risk is above the threshold.
 APPROVAL_MODES: tuple[str, ...] = ("prompt", "auto", "deny")
-#: Failure modes the risk weights may name.
-RISK_TERMS: tuple[str, ...] = ("collision", "fall", "grasp")
 
 T = TypeVar("T")
 
@@ -317,7 +317,7 @@ def _risk(node: Node, scene: SceneConfig | None = None) -> RiskConfig:
             "grasp": ("grasp", _grasp),
             "weights": ("weights", _weights),
             "severity": ("severity", _severity),
-            "ordering": ("ordering", lambda n: n.choice(ORDERINGS)),
+            "ordering": ("ordering", lambda n: n.choice(ordering_names())),
             "threshold": ("threshold", Node.non_negative),  # its maximum: check_threshold
             "guard": ("guard", _guard),
             "rollouts": ("rollouts", _rollouts),
@@ -342,31 +342,12 @@ def _com_margin(node: Node) -> float:
 def max_ordering_value(risk: RiskConfig, scene: SceneConfig | None = None) -> tuple[float, str]:
     """The largest value ``risk.ordering`` can take, and how it is made up (for messages).
 
-    probability: 1. weighted_sum: the collision weight times the collision metric's largest
-    score (peak_weight + exposure_weight) plus the fall and grasp weights (their scores are at
-    most 1). expected_loss: the collision severity (or an obstacle's own, if ``scene`` has a
-    larger one) times the largest body-part factor (1 for a part not listed) plus the fall and
-    drop severities.
+    Each ordering says it (:attr:`executive.risk.orderings.Ordering.max_value`): a probability is
+    at most 1; a weighted sum is at most each mode's weight times its score's largest value; an
+    expected loss at most the sum of the modes' severities, a per-body mode's (collision) the
+    largest, an obstacle's own included, times the largest body-part factor.
     """
-    if risk.ordering == "probability":
-        return 1.0, "a probability is at most 1"
-    if risk.ordering == "weighted_sum":
-        w = dict(risk.weights)
-        peak = risk.collision.peak_weight + risk.collision.exposure_weight
-        total = w.get("collision", 0.0) * peak + w.get("fall", 0.0) + w.get("grasp", 0.0)
-        return total, (
-            f"weights collision {w.get('collision', 0.0):g} x (peak_weight + exposure_weight) {peak:g} "
-            f"+ fall {w.get('fall', 0.0):g} + grasp {w.get('grasp', 0.0):g}"
-        )
-    sev = risk.severity
-    factor = max([1.0, *(f for _, f in sev.body_parts)])
-    own = [b.severity for b in scene.obstacles if b.severity is not None] if scene is not None else []
-    collision = max([sev.collision, *own])
-    total = collision * factor + sev.fall + sev.drop
-    return total, (
-        f"severity collision {collision:g} x largest body-part factor {factor:g} "
-        f"+ fall {sev.fall:g} + drop {sev.drop:g}"
-    )
+    return ordering_named(risk.ordering).max_value(risk, scene)
 
 
 def _check_threshold(node: Node, risk: RiskConfig, scene: SceneConfig | None = None) -> None:
@@ -473,25 +454,34 @@ def _grasp(node: Node) -> GraspRiskConfig:
     return config
 
 
+def _mode_key(child: Node, key: str, extra: tuple[str, ...] = ()) -> str:
+    """The failure mode a ``risk.weights`` / ``risk.severity`` key names (an old name warns)."""
+    name = canonical_mode(key, f"{child.source}: {child.path}")
+    if name is None:
+        child.fail(unknown_name("key", key, [*mode_names(), *extra], "valid keys"))
+    return name
+
+
 def _weights(node: Node) -> tuple[tuple[str, float], ...]:
-    node.check_keys(optional=RISK_TERMS)
-    weights = dict(RiskConfig().weights)
+    if not node.is_mapping():
+        node.expected("a mapping of failure mode -> weight, e.g. {collision: 1.0, fall: 2.0}")
+    weights = dict(default_weights())
     for key, child in node.items():
-        weights[key] = child.number(ge=0.0, le=R.WEIGHT_MAX)
+        weights[_mode_key(child, key)] = child.number(ge=0.0, le=R.WEIGHT_MAX)
     return tuple(weights.items())
 
 
 def _severity(node: Node) -> Severity:
-    return read_fields(
-        node,
-        Severity,
-        {
-            "collision": ("collision", between(0.0, R.SEVERITY_MAX, open_low=True)),
-            "fall": ("fall", between(0.0, R.SEVERITY_MAX, open_low=True)),
-            "drop": ("drop", between(0.0, R.SEVERITY_MAX, open_low=True)),
-            "body_parts": ("body_parts", _body_parts),
-        },
-    )
+    if not node.is_mapping():
+        node.expected("a mapping of failure mode -> severity, and body_parts")
+    modes: dict[str, float] = {}
+    body_parts = None
+    for key, child in node.items():
+        if key == "body_parts":
+            body_parts = _body_parts(child)
+        else:
+            modes[_mode_key(child, key, ("body_parts",))] = between(0.0, R.SEVERITY_MAX, open_low=True)(child)
+    return Severity.from_modes(modes, body_parts)
 
 
 def _body_parts(node: Node) -> tuple[tuple[str, float], ...]:

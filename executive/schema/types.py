@@ -21,6 +21,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar, Literal
 
+from executive.schema.failure_modes import failure_mode, failure_modes, mode_names
+
 __all__ = [
     "OBSTACLE_CATEGORIES",
     "SHAPES",
@@ -39,6 +41,7 @@ __all__ = [
     "Task",
     "TrialsConfig",
     "Uncertainty",
+    "default_weights",
 ]
 
 Shape = Literal["box", "cylinder", "sphere"]
@@ -167,16 +170,66 @@ class GraspRiskConfig:
     angle_weight: float = 0.4  # [0, 100]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, init=False)
 class Severity:
-    """Cost of each failure mode (dimensionless, relative) and per body part for collisions."""
+    """Cost of each failure mode (dimensionless, relative) and per body part for collisions.
 
-    collision: float = 3.0  # (0, 1000]
-    fall: float = 10.0  # (0, 1000]
-    drop: float = 2.0  # (0, 1000]
-    # Factor on the collision severity per body part, each (0, 1000]; a name is a label (head, hand,
-    # forearm) or a body of the robot's MJCF (executive.robot.model); any other name is rejected.
-    body_parts: tuple[tuple[str, float], ...] = (("head", 3.0), ("hand", 1.5), ("forearm", 1.0))
+    One value per mode of :mod:`executive.schema.failure_modes` (``Severity(fall=20.0)``; a
+    mode not given keeps the table's default), read as an attribute (``severity.fall``) or
+    with :meth:`of`. ``body_parts``: the factor on the collision severity per body part,
+    each (0, 1000]; a name is a label (head, hand, forearm) or a body of the robot's MJCF
+    (executive.robot.model); any other name is rejected.
+    """
+
+    modes: tuple[tuple[str, float], ...]  # (mode, severity), each (0, 1000]
+    body_parts: tuple[tuple[str, float], ...]
+
+    def __init__(
+        self,
+        *,
+        body_parts: tuple[tuple[str, float], ...] = (("head", 3.0), ("hand", 1.5), ("forearm", 1.0)),
+        **modes: float,
+    ) -> None:
+        object.__setattr__(self, "modes", _every_mode(modes))
+        object.__setattr__(self, "body_parts", tuple(body_parts))
+
+    @classmethod
+    def from_modes(
+        cls, modes: dict[str, float], body_parts: tuple[tuple[str, float], ...] | None = None
+    ) -> Severity:
+        """A severity of ``modes`` (mode -> value) and ``body_parts`` (None: the default factors)."""
+        out = cls() if body_parts is None else cls(body_parts=body_parts)
+        object.__setattr__(out, "modes", _every_mode(modes))
+        return out
+
+    def of(self, mode: str) -> float:
+        """The severity of ``mode``: the scenario's, else the failure-mode table's default."""
+        return dict(self.modes).get(mode, failure_mode(mode).severity)
+
+    def __getattr__(self, name: str) -> float:
+        if name.startswith("_") or name not in mode_names():
+            raise AttributeError(name)
+        return self.of(name)
+
+    def __reduce__(self) -> tuple[object, ...]:
+        return (_severity, (self.body_parts, self.modes))
+
+
+def _every_mode(given: dict[str, float]) -> tuple[tuple[str, float], ...]:
+    """(mode, severity) for every mode of the table: ``given``'s, else the table's default."""
+    for name in given:
+        failure_mode(name)  # raises, listing the valid names
+    return tuple((m.name, float(given.get(m.name, m.severity))) for m in failure_modes())
+
+
+def _severity(body_parts: tuple[tuple[str, float], ...], modes: tuple[tuple[str, float], ...]) -> Severity:
+    """Unpickle a :class:`Severity` (its constructor takes the modes as keywords)."""
+    return Severity.from_modes(dict(modes), body_parts)
+
+
+def default_weights() -> tuple[tuple[str, float], ...]:
+    """``risk.weights``' default: every failure mode's seed weight from the table."""
+    return tuple((m.name, m.weight) for m in failure_modes())
 
 
 @dataclass(frozen=True)
@@ -223,17 +276,13 @@ class RiskConfig:
     collision: CollisionRiskConfig = field(default_factory=CollisionRiskConfig)
     fall: FallRiskConfig = field(default_factory=FallRiskConfig)
     grasp: GraspRiskConfig = field(default_factory=GraspRiskConfig)
-    weights: tuple[tuple[str, float], ...] = (
-        ("collision", 1.0),
-        ("fall", 2.0),
-        ("grasp", 1.0),
-    )  # each [0, 100]
+    # (mode, seed weight), each [0, 100]; a mode not given keeps the table's default
+    weights: tuple[tuple[str, float], ...] = field(default_factory=default_weights)
     severity: Severity = field(default_factory=Severity)
-    ordering: Literal["weighted_sum", "probability", "expected_loss"] = "expected_loss"
-    # >= 0 and below the largest value the ordering can take (executive.scenario.max_ordering_value:
-    # probability 1; weighted_sum the collision weight x (peak_weight + exposure_weight) + the fall and
-    # grasp weights; expected_loss the collision severity x the largest body-part factor + fall + drop):
-    # a threshold no alternative can exceed would never ask for approval, and is rejected.
+    ordering: str = "expected_loss"  # a name of executive.risk.orderings' registry
+    # >= 0 and below the largest value the ordering can take (Ordering.max_value in
+    # executive.risk.orderings): a threshold no alternative can exceed would never ask for
+    # approval, and is rejected.
     threshold: float = 0.3
     guard: GuardConfig = field(default_factory=GuardConfig)
     rollouts: RolloutConfig = field(default_factory=RolloutConfig)
