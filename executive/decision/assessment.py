@@ -10,7 +10,7 @@ Per alternative:
   distance profile;
 * fall: the alternative's steps concatenated into one trajectory; the CoM error
   is one persistent bias, so its probability is exact over all knots;
-* grasp (the drop mode): the first grasp of the object from the table, against
+* drop: the first grasp of the object from the table, against
   the scene's object pose uncertainty (a handover's second grasp takes the object
   from a hand whose pose the robot knows; it is not scored here): the jaws must clear the
   object's sides all the way down the planned approach (offset and yaw jointly), and the
@@ -32,6 +32,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from executive.decision.risk_models import PlanContext, register_model, risk_model
 from executive.monitoring.detectors import DetectorThresholds
 from executive.planning.plan import AlternativePlan
 from executive.planning.planner import Planner, PlanningError, Trajectory
@@ -51,6 +52,7 @@ from executive.risk.pinch import closing_shift, horizontal_shift, placement_tole
 from executive.risk.press import press_forces
 from executive.risk.push import assess_placement, plan_forces
 from executive.risk.report import RiskReport
+from executive.schema.failure_modes import mode_names
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
 from executive.tasks.steps import plan_alternative
@@ -97,8 +99,9 @@ def concatenate(trajectories: list[Trajectory], name: str) -> Trajectory:
     )
 
 
-def _collision(model: CollisionModel, plan: AlternativePlan) -> RiskReport:
-    """One distance profile through every motion step, each with its own allowances."""
+def _collision_model(ctx: PlanContext) -> RiskReport:
+    """The collision mode: one distance profile through every motion step, each with its own allowances."""
+    model, plan = ctx.collision_model, ctx.plan
     obj = plan.task.object
     times: list[np.ndarray] = []
     knots: list[KnotDistance] = []
@@ -116,19 +119,29 @@ def _collision(model: CollisionModel, plan: AlternativePlan) -> RiskReport:
 
 
 def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionModel) -> CombinedRisk:
-    """Collision, fall and grasp risk of a planned alternative, and their combination."""
+    """Every failure mode's risk of a planned alternative (its registered model), and their combination."""
     scenario = world.scenario
-    ordered = plan.ordered_trajectories()
-    whole = concatenate(ordered, plan.name)
+    whole = concatenate(plan.ordered_trajectories(), plan.name)
     pushes = plan_forces(world, plan, scenario.uncertainty)  # the reaction of a push moves the ZMP
     external = pushes if pushes is not None else press_forces(plan)  # or a press's
-    fall = assess_fall(world, whole, scenario.risk, scenario.uncertainty, external)
-    collision = _collision(collision_model, plan)
+    context = PlanContext(world, plan, collision_model, whole, pushes, external)
+    return combine([risk_model(mode)(context) for mode in mode_names()], scenario.risk)
+
+
+def _fall_model(ctx: PlanContext) -> RiskReport:
+    """The fall mode: the CoM against the support polygon over the whole plan (:mod:`executive.risk.fall`)."""
+    scenario = ctx.world.scenario
+    return assess_fall(ctx.world, ctx.whole, scenario.risk, scenario.uncertainty, ctx.external)
+
+
+def _drop_model(ctx: PlanContext) -> RiskReport:
+    """The drop mode: a push falling short; else the grasps off the table (or a placement from
+    the hand) united with the hold model (:func:`drop_union`)."""
+    world, plan, scenario = ctx.world, ctx.plan, ctx.world.scenario
     grasp_step = next((s for s in plan.steps if s.kind == "grasp"), None)
-    if pushes is not None and grasp_step is None:  # a push holds nothing: its drop mode is falling short
+    if ctx.pushes is not None and grasp_step is None:  # a push holds nothing: its drop mode is falling short
         tol = DetectorThresholds().place_position_tol
-        drop = assess_placement(world, plan, pushes, scenario.risk, scenario.uncertainty, tol)
-        return combine([collision, fall, drop], scenario.risk)
+        return assess_placement(world, plan, ctx.pushes, scenario.risk, scenario.uncertainty, tol)
     if grasp_step is None:  # the object is in hand from the start (a place) or never taken
         grasp = _placed_from_hand(world, plan)
     else:
@@ -137,7 +150,7 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
         grasps = [_table_grasp(world, plan, i) for i, s in enumerate(plan.steps) if _off_table(plan, i)]
         grasp = _union(grasps)
     hold = assess_hold(world, plan, scenario.risk, scenario.uncertainty)
-    return combine([collision, fall, drop_union(grasp, hold)], scenario.risk)
+    return drop_union(grasp, hold)
 
 
 def _off_table(plan: AlternativePlan, i: int) -> bool:
@@ -200,6 +213,7 @@ def drop_union(grasp: RiskReport, hold: RiskReport) -> RiskReport:
     details["drop_reason"] = "hold: the grip slips or a handover's receiver misses" if ph > pg else "grasp"
     return replace(
         grasp,
+        mode="drop",
         probability=1.0 - (1.0 - pg) * (1.0 - ph),
         probability_bounds=(lower, upper),
         details=details,
@@ -218,7 +232,7 @@ def _placed_from_hand(world: World, plan: AlternativePlan) -> RiskReport:
     """
     severity = world.scenario.risk.severity.drop
     if not any(s.kind == "place" for s in plan.steps):
-        return RiskReport("grasp", 0.0, (0.0, 0.0), severity, 0.0, details={"grasp": "none"})
+        return RiskReport("drop", 0.0, (0.0, 0.0), severity, 0.0, details={"grasp": "none"})
     grip = getattr(world, "grips", {}).get(plan.task.object)
     looks = max(1, int(getattr(grip, "looks", 1)))
     sigma = world.scenario.uncertainty.object_position / np.sqrt(looks)
@@ -226,7 +240,7 @@ def _placed_from_hand(world: World, plan: AlternativePlan) -> RiskReport:
     p = float(np.exp(-(tol**2) / (2 * sigma**2))) if sigma > 0 else 0.0
     details: dict[str, float | str] = {"grasp": "none: held from the start", "grip_looks": float(looks)}
     details["misplace_probability"] = p
-    return RiskReport("grasp", p, (p, p), severity, p, details=details)
+    return RiskReport("drop", p, (p, p), severity, p, details=details)
 
 
 def _grasp(
@@ -325,3 +339,8 @@ def assess_task(
         risk = assess_plan(world, plan, model)
         out.append(AlternativeRisk(name, True, risk, plan, "", t1 - t0, time.perf_counter() - t1))
     return out
+
+
+register_model("collision", _collision_model)
+register_model("fall", _fall_model)
+register_model("drop", _drop_model)

@@ -22,18 +22,17 @@ from typing import NamedTuple
 import numpy as np
 
 from executive.risk.combine import CombinedRisk, combine
+from executive.schema.failure_modes import failure_mode, mode_names
 from executive.schema.types import RiskConfig
 
-__all__ = ["OBSERVED_AS", "Choice", "ModePosterior", "choice_confidence", "fuse", "posteriors"]
+__all__ = ["Choice", "ModePosterior", "choice_confidence", "fuse", "observed_as", "posteriors"]
 
-#: The rollout outcomes that count as failures of each analytic mode. The detector's
-#: ``unstable`` (a simulation that blew up, a robot no longer controlled) counts as a fall:
-#: nothing is re-tried after either. ``timeout`` counts in no mode; it is reported.
-OBSERVED_AS: Mapping[str, tuple[str, ...]] = {
-    "collision": ("collision",),
-    "fall": ("fall", "unstable"),
-    "grasp": ("drop",),
-}
+
+def observed_as(mode: str) -> tuple[str, ...]:
+    """The rollout outcomes that count as failures of ``mode``: its verdicts in the failure-mode
+    table (:mod:`executive.schema.failure_modes`; a fall's include ``unstable``). Outcomes that are
+    no risk mode (``timeout``, ``task``, ``tracking``, ``guard``) count in none."""
+    return failure_mode(mode).verdicts if mode in mode_names() else ()
 
 
 @dataclass(frozen=True)
@@ -65,13 +64,13 @@ def posteriors(
 ) -> list[ModePosterior]:
     """Per analytic mode, the posterior after ``counts`` (outcome -> rollouts) of ``n`` rollouts.
 
-    Modes with no observed counterpart (not in :data:`OBSERVED_AS`) keep the analytic value
+    Modes with no observed counterpart (no verdicts: :func:`observed_as`) keep the analytic value
     (``n`` counts as 0 for them).
     """
     out = []
     for mode, report in analytic.components.items():
         p = report.probability
-        observed = OBSERVED_AS.get(mode)
+        observed = observed_as(mode)
         k = sum(counts.get(o, 0) for o in observed) if observed else 0
         trials = n if observed else 0
         if prior_weight + trials == 0:  # no prior and no data: the analytic value as a point mass

@@ -334,6 +334,4 @@ def assess_placement(
         else "the object's position error across the push",
     }
     severity = float(risk_config.severity.drop)
-    return RiskReport(
-        "grasp", probability, (probability, probability), severity, probability, details=details
-    )
+    return RiskReport("drop", probability, (probability, probability), severity, probability, details=details)
