@@ -72,11 +72,11 @@ class Grasp(RobotBehaviour):
             return Status.SUCCESS
         if t < self.timeout_s:
             return Status.RUNNING
-        self.feedback_message = (
+        return self.fail(
+            "drop",
             f"drop: {self.side} hand closed but does not hold {self.obj} "
-            f"({n} hand geoms touching, {force:.1f} N; need {self.min_contacts} and {self.min_force:.0f} N)"
+            f"({n} hand geoms touching, {force:.1f} N; need {self.min_contacts} and {self.min_force:.0f} N)",
         )
-        return Status.FAILURE
 
     def terminate(self, new_status: Status) -> None:
         if new_status in (Status.FAILURE, Status.INVALID):

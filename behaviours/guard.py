@@ -71,6 +71,7 @@ class RiskGuard(py_trees.decorators.Decorator):
         self._robot: Any = None
         self.last_verdict: Any = None  # executive.monitoring.live_risk.GuardVerdict of the latest check
         self.tripped: Any = None  # the verdict that stopped the motion, if any
+        self.verdict = ""  # "guard" once tripped (the failure-mode table's outcome)
 
     def _monitor(self) -> Any:
         return self.bb.get(LIVE_RISK_KEY) if self.bb.exists(LIVE_RISK_KEY) else None
@@ -129,5 +130,5 @@ class RiskGuard(py_trees.decorators.Decorator):
             return status
         self.tripped = verdict
         robot.hold()  # safe hold where the robot is, before anything else
-        self.feedback_message = verdict.reason
+        self.feedback_message, self.verdict = verdict.reason, "guard"
         return Status.FAILURE

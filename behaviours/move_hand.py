@@ -99,11 +99,11 @@ class MoveHand(RobotBehaviour):
             return Status.SUCCESS
         if t < self.trajectory.duration + self.settle_s:
             return Status.RUNNING
-        self.feedback_message = (
+        return self.fail(
+            "tracking",
             f"{self.trajectory.name}: hand {error * 1000:.0f} mm from its planned end "
-            f"(tolerance {self.tolerance * 1000:.0f} mm)"
+            f"(tolerance {self.tolerance * 1000:.0f} mm)",
         )
-        return Status.FAILURE
 
     def _targets(self, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """The target at trajectory time ``t`` and its rate over the period, (q(t + dt) - q(t)) / dt."""

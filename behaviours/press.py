@@ -189,8 +189,7 @@ class Press(RobotBehaviour):
         self._compliance = press_compliance(robot.world, self.side, data.qpos, self._into)
         problem = self._torque_limit(data)
         if problem:
-            self.feedback_message = f"press: force {self.force:g} N {problem}"
-            return Status.FAILURE
+            return self.fail("task", f"press: force {self.force:g} N {problem}")
         self._phase, self._since, self._steady = "settle", robot.time, 0
         return Status.RUNNING
 
@@ -222,8 +221,7 @@ class Press(RobotBehaviour):
             return Status.RUNNING
         if t < self.settle_s:
             return Status.RUNNING
-        self.feedback_message = self._not_reached(f)
-        return Status.FAILURE
+        return self.fail("task", self._not_reached(f))
 
     def _not_reached(self, f: float) -> str:
         band = f"{self.force:g} +- {self.tolerance:.2g} N"
@@ -262,11 +260,11 @@ class Press(RobotBehaviour):
         self.samples.append((self._robot.time, f))
         if abs(f - self.force) > self.tolerance:
             low = "dropped" if f < self.force else "rose"
-            self.feedback_message = (
+            return self.fail(
+                "task",
                 f"press: force {low} to {f:.1f} N on {self.target} {t:.2f} s into the {self.hold_s:g} s hold "
-                f"(commanded {self.force:g} +- {self.tolerance:.2g} N)"
+                f"(commanded {self.force:g} +- {self.tolerance:.2g} N)",
             )
-            return Status.FAILURE
         if t < self.hold_s:
             self.feedback_message = f"{self.name}: {f:.1f} N, {t:.2f}/{self.hold_s:g} s"
             return Status.RUNNING

@@ -38,10 +38,12 @@ class Push(MoveHand):
         obj = self.touching[1]
         if self.trajectory.carried is not None:  # the hand stopped behind an object it cannot slide
             self.feedback_message = f"drop: the push stalled behind {obj}: {self.feedback_message}"
+            self.verdict = "drop"
         else:  # coming down behind it, the hand landed on it: it is nearer than estimated
             self.feedback_message = (
                 f"drop: the hand came down on {obj}, not behind it: {self.feedback_message}"
             )
+            self.verdict = "drop"
         return status
 
     def _set_detector_phase(self) -> None:

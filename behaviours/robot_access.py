@@ -29,10 +29,16 @@ def install(robot: Any) -> None:
 
 
 class RobotBehaviour(py_trees.behaviour.Behaviour):
-    """Base of the task-level behaviours: registered access to the robot and the holding map."""
+    """Base of the task-level behaviours: registered access to the robot and the holding map.
+
+    A behaviour that fails sets ``verdict`` to what went wrong, a verdict of the failure-mode
+    table (executive.schema.failure_modes: ``drop``, ``tracking``, ``task``, ...), and says
+    how in ``feedback_message``; :meth:`fail` does both.
+    """
 
     def __init__(self, name: str, writes_holding: bool = False) -> None:
         super().__init__(name=name)
+        self.verdict = ""
         self.bb = self.attach_blackboard_client(name=name, namespace=NAMESPACE)
         self.bb.register_key("robot", access=py_trees.common.Access.READ)
         access = py_trees.common.Access.WRITE if writes_holding else py_trees.common.Access.READ
@@ -50,4 +56,10 @@ class RobotBehaviour(py_trees.behaviour.Behaviour):
         if failure is None:
             return False
         self.feedback_message = failure.detail  # already "<mode>: ..."
+        self.verdict = failure.mode
         return True
+
+    def fail(self, verdict: str, message: str) -> py_trees.common.Status:
+        """Fail with ``verdict`` (a verdict of the failure-mode table) and ``message``; returns FAILURE."""
+        self.verdict, self.feedback_message = verdict, message
+        return py_trees.common.Status.FAILURE

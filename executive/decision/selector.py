@@ -15,7 +15,8 @@ robot holds) while it plans, and keep their period. It then:
 3. ticks the chosen child. If it fails, the selector re-plans from the current
    state (the robot's measured joints, the objects where the robot now observes
    them) without the alternatives already tried, and goes on with the next.
-   A fall or unstable simulation ends the task at once: nothing is re-tried on a
+   A terminal failure (a fall or an unstable simulation: the failure-mode table's
+   ``terminal``) ends the task at once: nothing is re-tried on a
    robot that may not be standing.
 
 The estimate follows the objects (:mod:`executive.world.observation`): the selector looks
@@ -69,7 +70,9 @@ from executive.decision.planning_job import (
 )
 from executive.decision.planning_worker import PlanningWorker, WorkerLost
 from executive.errors import ExecutiveError
+from executive.execution.runner import behaviour_failure
 from executive.risk.collision import breach_summary
+from executive.schema.failure_modes import failure_mode, mode_of_verdict
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
 from executive.world.model import World
@@ -83,8 +86,6 @@ __all__ = ["RiskSelector", "task_label"]
 Status = py_trees.common.Status
 FloatArray = np.ndarray
 
-#: Failure modes after which nothing is re-tried.
-TERMINAL_MODES = ("fall", "unstable")
 #: Planning workers lost in one decision before the task fails (each is replaced and re-planned).
 MAX_WORKER_LOSSES = 3
 
@@ -593,7 +594,8 @@ class RiskSelector(py_trees.composites.Composite):
         failure = self._failure_of(child)
         self.log.record("failure", task=self.name, alternative=child.name, **failure)
         self._observe("after_failure")  # the re-plan below starts from this look
-        if failure["mode"] in TERMINAL_MODES:
+        mode = mode_of_verdict(failure["mode"])
+        if mode is not None and failure_mode(mode).terminal:
             return self._finish("failed", failure)
         left = [a for a in self.names if a not in self.tried]
         if not left:
@@ -631,13 +633,7 @@ class RiskSelector(py_trees.composites.Composite):
                 "bodies": list(found.bodies),
                 "force": found.force,
             }
-        mode = (
-            "guard"
-            if message.startswith("guard:")
-            else message.split(":", 1)[0]
-            if ":" in message
-            else "failed"
-        )
+        mode = behaviour_failure(tip, 0.0).mode
         return {"mode": mode, "detail": message, "behaviour": tip.name if tip else ""}
 
     def _finish(self, outcome: str, failure: dict[str, Any] | None) -> Status:

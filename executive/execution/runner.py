@@ -11,16 +11,17 @@ import time
 import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, cast, get_args
+from typing import Any
 
 import numpy as np
 import py_trees
 
 from behaviours.robot_access import NAMESPACE, install
 from executive.execution.simulated import SimulatedRobot
-from executive.monitoring.detectors import Failure, FailureDetector, FailureMode
+from executive.monitoring.detectors import Failure, FailureDetector
 from executive.planning.plan import AlternativePlan, held_at_start
 from executive.planning.planner import Planner, PlanningError
+from executive.schema.failure_modes import mode_of_verdict
 from executive.schema.types import Scenario
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
@@ -37,8 +38,6 @@ __all__ = [
 ]
 
 Status = py_trees.common.Status
-#: Behaviours' own verdicts that mean the task was not done (mode ``task``), by message prefix.
-TASK_FAILURES = ("press",)
 
 
 @dataclass
@@ -111,7 +110,7 @@ def execute_plan(
     elif root.status == Status.FAILURE:
         tip = root.tip()
         feedback = tip.feedback_message if tip else ""
-        result.failure = robot.failure or behaviour_failure(feedback, float(truth.data.time))
+        result.failure = robot.failure or behaviour_failure(tip, float(truth.data.time))
         result.outcome = "failed"
         result.message = f"{tip.name if tip else plan.name}: {feedback}"
     else:
@@ -155,19 +154,20 @@ def _verify(result: RunResult, task: Task, truth: World, detector: FailureDetect
         result.message = str(verdict.fields.get("detail", ""))
 
 
-def behaviour_failure(feedback: str, time_s: float) -> Failure | None:
-    """The failure a behaviour reported itself (its message starts with the mode, ``drop: ...``).
+def behaviour_failure(behaviour: py_trees.behaviour.Behaviour | None, time_s: float) -> Failure:
+    """The failure a behaviour reported itself: its ``verdict`` and its feedback message.
 
-    A behaviour that could not do what its task asks (``press: ...``: the force not reached or
-    not held) is mode ``task``: no risk mode predicts it, and it is no fall. None when the
-    message names no failure mode (e.g. a hand that lost its track).
+    The verdict is one of the failure-mode table's (:mod:`executive.schema.failure_modes`):
+    ``drop`` (a grasp that holds nothing), ``tracking`` (a hand stalled short of its plan),
+    ``guard``, ``task`` (a press whose force was not reached). A behaviour that fails without
+    one did not do its task: ``task``.
+
+    Raises:
+        ExecutiveError: the verdict is not in the table.
     """
-    mode = feedback.split(":", 1)[0] if ":" in feedback else ""
-    if mode in TASK_FAILURES:
-        return Failure("task", feedback, time_s)
-    if mode in get_args(FailureMode):
-        return Failure(cast(FailureMode, mode), feedback, time_s)
-    return None
+    verdict = str(getattr(behaviour, "verdict", "") or "task")
+    mode_of_verdict(verdict)  # raises for a verdict the table does not know
+    return Failure(verdict, behaviour.feedback_message if behaviour is not None else "", time_s)
 
 
 def run_alternative(
@@ -208,8 +208,8 @@ def error_fields(exc: BaseException) -> dict[str, Any]:
 def outcome_fields(result: RunResult) -> dict[str, Any]:
     """What a physics run's record says of its outcome: outcome, failure, sim time, placement error.
 
-    ``outcome`` is ``success``, ``timeout`` or the failure detector's mode (``unstable`` when
-    the run failed without a detector verdict).
+    ``outcome`` is ``success``, ``timeout`` or the verdict of the failure (a detector's or a
+    behaviour's; ``task`` when the run failed without one).
     """
     out: dict[str, Any] = {"sim_time_s": round(result.sim_time_s, 6)}
     if result.placement_error_m is not None:
@@ -221,7 +221,7 @@ def outcome_fields(result: RunResult) -> dict[str, Any]:
         out["failure"] = {"mode": "timeout", "detail": result.message}
     else:
         failure = result.failure
-        mode = failure.mode if failure is not None else "unstable"
+        mode = failure.mode if failure is not None else "task"
         out["outcome"] = mode
         out["failure"] = {
             "mode": mode,

@@ -95,7 +95,6 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
-from typing import Literal
 
 import mujoco
 import numpy as np
@@ -111,10 +110,7 @@ __all__ = [
     "DetectorThresholds",
     "Failure",
     "FailureDetector",
-    "FailureMode",
 ]
-
-FailureMode = Literal["collision", "fall", "drop", "unstable", "task"]
 
 # Contact codes of the geom x geom table; 0 means allowed and silent.
 _ALLOWED = 0
@@ -139,7 +135,7 @@ class DetectorError(ExecutiveError, ValueError):
 class Failure:
     """What went wrong, when, and (for contacts) between which bodies and how hard."""
 
-    mode: FailureMode
+    mode: str  # a verdict of the failure-mode table (executive.schema.failure_modes)
     detail: str  # human-readable: names bodies/geoms, force in N, heights/angles, times
     time: float  # simulation time (s)
     bodies: tuple[str, ...] = ()  # body names involved (collision)
