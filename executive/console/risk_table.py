@@ -13,10 +13,9 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-__all__ = ["MODES", "number", "physics_table", "ranked", "risk_table", "verdict_line"]
+from executive.schema.failure_modes import failure_modes, mode_names
 
-MODES = ("collision", "fall", "grasp")
-_MODE_LABEL = {"collision": "collision", "fall": "fall", "grasp": "drop"}
+__all__ = ["number", "physics_table", "ranked", "risk_table", "verdict_line"]
 
 
 def number(value: float | None) -> str:
@@ -59,13 +58,13 @@ def verdict_line(rows: Sequence[Mapping[str, Any]], ordering: str, threshold: fl
 def risk_table(rows: Sequence[Mapping[str, Any]], ordering: str, threshold: float) -> str:
     """Markdown: one line per alternative, ranked, with each failure mode's probability.
 
-    Columns: rank, alternative, collision, fall, drop (the grasp mode), P(any), expected loss,
+    Columns: rank, alternative, each failure mode's (executive.schema.failure_modes), P(any), expected loss,
     and the seed's weighted sum when that is the ordering; the ordering's column is marked
     ``!`` where it is above the threshold. Infeasible alternatives follow with their reason.
     """
     columns = {"probability": "combined", "expected_loss": "expected_loss", "weighted_sum": "weighted_sum"}
-    keys = ["collision", "fall", "grasp", "combined", "expected_loss"]
-    heads = ["collision", "fall", "drop", "P(any)", "exp. loss"]
+    keys = [*mode_names(), "combined", "expected_loss"]
+    heads = [*(m.label for m in failure_modes()), "P(any)", "exp. loss"]
     if ordering == "weighted_sum":
         keys.append("weighted_sum")
         heads.append("seed sum")
@@ -96,7 +95,7 @@ def physics_table(rows: Sequence[Mapping[str, Any]]) -> str:
     with_rollouts = any(r["physics"].get("modes") for r in checked)
     head = "| alternative | dry run | rollouts |"
     if with_rollouts:
-        head += "".join(f" {_MODE_LABEL[m]} |" for m in MODES)
+        head += "".join(f" {m.label} |" for m in failure_modes())
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for row in checked:
         physics = row["physics"]
@@ -112,7 +111,7 @@ def physics_table(rows: Sequence[Mapping[str, Any]]) -> str:
         line = f"| {row['name']} | {outcome} | {rolled} |"
         if with_rollouts:
             modes = physics.get("modes", {})
-            for m in MODES:
+            for m in mode_names():
                 v = modes.get(m)
                 line += (
                     f" {_short(v['analytic'])} → {_short(v['fused'])} "

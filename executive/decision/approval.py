@@ -35,6 +35,8 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from typing import IO, Any, Literal, Protocol
 
+from executive.schema.failure_modes import failure_modes, mode_names
+
 __all__ = [
     "AlternativeRisk",
     "ApprovalChannel",
@@ -246,8 +248,9 @@ def request_table(request: ApprovalRequest) -> str:
     lines = [
         f"APPROVAL NEEDED for {request.task}",
         f"  {request.reason}",
-        f"  {'#':>2} {'alternative':<15}{'collision':>10}{'fall':>10}{'grasp':>10}{'P(any)':>10}"
-        f"{'exp. loss':>10}",
+        f"  {'#':>2} {'alternative':<15}"
+        + "".join(f"{m.label:>10}" for m in failure_modes())
+        + f"{'P(any)':>10}{'exp. loss':>10}",
     ]
     for i, alt in enumerate(request.alternatives, 1):
         mark = "*" if alt.name == request.recommended else " "
@@ -257,7 +260,7 @@ def request_table(request: ApprovalRequest) -> str:
         r = alt.risk
         lines.append(
             f"{mark} {i:>2} {alt.name:<15}"
-            + "".join(f"{r.get(k, float('nan')):>10.4f}" for k in ("collision", "fall", "grasp", "combined"))
+            + "".join(f"{r.get(k, float('nan')):>10.4f}" for k in (*mode_names(), "combined"))
             + f"{r.get('expected_loss', float('nan')):>10.4f}"
         )
         if alt.physics:

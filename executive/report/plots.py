@@ -17,11 +17,10 @@ import numpy as np
 from executive.decision.assessment import AlternativeRisk
 from executive.decision.physics_check import physics_text
 from executive.risk.collision import breach_summary
+from executive.schema.failure_modes import failure_modes, mode_names
 from executive.schema.types import Scenario
 
 __all__ = ["chosen_index", "plot_alternatives", "risk_json", "risk_table"]
-
-_MODES = ("collision", "fall", "grasp")
 
 
 def chosen_index(alternatives: Sequence[AlternativeRisk], ordering: str) -> int | None:
@@ -74,8 +73,9 @@ def risk_table(
     chosen = chosen_index(alternatives, ordering)
     chosen_mark, legend = _mark(scenario, alternatives, chosen, approval)
     head = (
-        f"{'':2}{'alternative':<15}{'collision':>10}{'fall':>10}{'grasp':>10}{'P(any)':>10}"
-        f"{'seed sum':>10}{'exp. loss':>10}{'min dist':>10}{'min CoM':>9}"
+        f"{'':2}{'alternative':<15}"
+        + "".join(f"{m.label:>10}" for m in failure_modes())
+        + f"{'P(any)':>10}{'seed sum':>10}{'exp. loss':>10}{'min dist':>10}{'min CoM':>9}"
     )
     lines = [f"task {task_label} (ranked by {ordering}; threshold {scenario.risk.threshold})", head]
     for i, alt in enumerate(alternatives):
@@ -89,7 +89,7 @@ def risk_table(
         margin = float(c["fall"].details.get("min_margin", float("nan")))
         lines.append(
             f"{mark} {alt.name:<15}"
-            + "".join(f"{c[m].probability:>10.4f}" for m in _MODES)
+            + "".join(f"{c[m].probability:>10.4f}" for m in mode_names())
             + f"{r.probability:>10.4f}{r.weighted_sum:>10.3f}{r.expected_loss:>10.4f}"
             + f"{dist * 1000:>8.1f}mm{margin * 1000:>7.1f}mm"
         )
@@ -102,7 +102,9 @@ def risk_table(
             )
         if alt.physics is not None:
             lines.append(f"  {'':<15}{physics_text(alt.physics)}{_fused_text(alt.physics)}")
-    lines.append(f"collision/fall/grasp/P(any): probabilities; seed sum: the seed's weighted sum; {legend}")
+    lines.append(
+        f"{'/'.join(mode_names())}/P(any): probabilities; seed sum: the seed's weighted sum; {legend}"
+    )
     return "\n".join(lines)
 
 
@@ -135,12 +137,12 @@ def risk_json(scenario: Scenario, tasks: Sequence[tuple[str, Sequence[Alternativ
             else:
                 r = alt.risk
                 row["risk"] = {
-                    **{m: float(r.components[m].probability) for m in _MODES},
+                    **{m: float(r.components[m].probability) for m in mode_names()},
                     "combined": float(r.probability),
                     "combined_bounds": [float(b) for b in r.probability_bounds],
                     "weighted_sum": float(r.weighted_sum),
                     "expected_loss": float(r.expected_loss),
-                    "seed": {m: float(r.components[m].seed_score) for m in _MODES},
+                    "seed": {m: float(r.components[m].seed_score) for m in mode_names()},
                 }
                 breach = breach_summary(r.components["collision"])
                 if breach is not None:

@@ -31,6 +31,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.errors import ExecutiveError
+from executive.schema.failure_modes import (
+    failure_mode,
+    failure_modes,
+    mode_names,
+    mode_of_verdict,
+    outcome,
+    verdict_names,
+)
 from executive.schema.types import Scenario, SceneVariation
 from executive.world.model import Perturbation
 
@@ -38,12 +46,12 @@ if TYPE_CHECKING:
     from executive.decision.physics_check import RolloutJob
 
 __all__ = [
-    "FAILURE_MODES",
-    "PREDICTOR",
     "CampaignResult",
     "Prediction",
     "TrialLog",
     "check_predictions",
+    "forecasts",
+    "observed_outcomes",
     "predict",
     "read_trials",
     "run_campaign",
@@ -53,13 +61,17 @@ __all__ = [
     "table_text",
 ]
 
-# What the detectors can report, in the order tables show them.
-FAILURE_MODES = ("collision", "fall", "drop", "unstable", "task", "timeout")
-# The predicted probability that forecasts each observed failure mode: the grasp risk is the
-# seed's risk that the object is not held (Long et al. 2018), so it forecasts drops.
-PREDICTOR = {"collision": "collision", "fall": "fall", "drop": "grasp"}
-# ... and, for any failure at all, the probability of any failure.
-_FORECASTS = {**PREDICTOR, "any": "combined"}
+
+def observed_outcomes() -> tuple[str, ...]:
+    """The verdicts a trial can end in, in the order tables show them: each failure mode's
+    verdicts, then the outcomes no mode predicts (the failure-mode table; ``error`` apart)."""
+    return tuple(v for v in verdict_names() if v != "error")
+
+
+def _forecasts_by_mode() -> dict[str, str]:
+    """Each failure mode's predicted probability (its own key), and ``any``'s: ``combined``."""
+    return {**{m: m for m in mode_names()}, "any": "combined"}
+
 
 Backend = Literal["local", "ray"]
 FloatArray = NDArray[np.float64]
@@ -73,7 +85,7 @@ class Prediction:
 
     alternative: str
     feasible: bool
-    risk: dict[str, float] | None  # CombinedRisk.as_dict(): collision, fall, grasp, combined, ...
+    risk: dict[str, float] | None  # CombinedRisk.as_dict(): each failure mode's, combined, ...
     value: float | None  # the scenario's ordering quantity
     error: str = ""
     plan: Any = field(default=None, repr=False)  # AlternativePlan (None when infeasible)
@@ -234,7 +246,8 @@ def run_trial(
     robot's CoM offset) and executes the plan in physics with the alternative forced (no
     selection, no approval, no live guards: the question is what the plan does, not whether a
     guard would stop it). Outcome: ``success``, or the detectors' failure mode ``collision``,
-    ``fall``, ``drop``, ``unstable`` or ``timeout`` (not finished in the time limit);
+    ``fall``, ``drop``, ``unstable``, or a verdict no mode predicts (``tracking``, ``task``,
+    ``timeout``: not finished in the time limit; :mod:`executive.schema.failure_modes`);
     ``infeasible`` when the alternative does not plan (nothing is executed) and ``error`` when
     the trial's code raised (a defect; counted, never hidden).
 
@@ -316,6 +329,17 @@ class TrialLog:
         self._file.close()
 
 
+def _current_names(record: dict[str, Any]) -> dict[str, Any]:
+    """A trial record with its predictions under the failure modes' current names (an old
+    campaign's ``grasp`` is ``drop``)."""
+    predicted = record.get("predicted")
+    if not isinstance(predicted, dict):
+        return record
+    old = {alias: m.name for m in failure_modes() for alias in m.aliases}
+    record["predicted"] = {old.get(k, k): v for k, v in predicted.items()}
+    return record
+
+
 def read_trials(path: Path, *, repair: bool = False) -> list[dict[str, Any]]:
     """The trials recorded in ``path``.
 
@@ -337,7 +361,7 @@ def read_trials(path: Path, *, repair: bool = False) -> list[dict[str, Any]]:
             raise ExecutiveError(f"{path}:{number}: not valid JSON ({exc})") from None
         if not isinstance(record, dict) or "trial" not in record or "alternative" not in record:
             raise ExecutiveError(f"{path}:{number}: not a trial record (no 'trial' and 'alternative')")
-        records.append(record)
+        records.append(_current_names(record))
     good = len(raw) - len(tail)
     if repair and good < len(raw):
         with path.open("r+b") as f:
@@ -493,11 +517,14 @@ def _executed(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     return [r for r in records if r["outcome"] not in ("infeasible", "error")]
 
 
-def _forecasts(executed: Sequence[dict[str, Any]]) -> Iterator[tuple[str, str, FloatArray, BoolArray]]:
+def forecasts(executed: Sequence[dict[str, Any]]) -> Iterator[tuple[str, str, FloatArray, BoolArray]]:
     """Per failure mode (and "any"): the predicting key, its probabilities and the 0/1 outcomes."""
-    for mode, key in _FORECASTS.items():
+    for mode, key in _forecasts_by_mode().items():
         p = np.array([r["predicted"][key] for r in executed], dtype=float)
-        y = np.array([r["outcome"] != "success" if mode == "any" else r["outcome"] == mode for r in executed])
+        verdicts = () if mode == "any" else failure_mode(mode).verdicts
+        y = np.array(
+            [r["outcome"] != "success" if mode == "any" else r["outcome"] in verdicts for r in executed]
+        )
         yield mode, key, p, y.astype(bool)
 
 
@@ -550,7 +577,7 @@ def summarise(
         "ece": ece_by,
         "spearman": rho[ordering],
         "spearman_by": rho,
-        "predictor": dict(_FORECASTS),
+        "predictor": _forecasts_by_mode(),
         "breach_obstacles": breach,
     }
 
@@ -596,11 +623,11 @@ def _alternative_summary(
     mine = [r for r in executed if r["alternative"] == name]
     infeasible = [r for r in records if r["alternative"] == name and r["outcome"] == "infeasible"]
     n = len(mine)
-    failures = {m: sum(r["outcome"] == m for r in mine) for m in FAILURE_MODES}
+    failures = {m: sum(r["outcome"] == m for r in mine) for m in observed_outcomes()}
     failures["any"] = sum(r["outcome"] != "success" for r in mine)
     predicted: dict[str, float | None] = {}
     if mine:
-        keys = ("collision", "fall", "grasp", "combined", "weighted_sum", "expected_loss")
+        keys = (*mode_names(), "combined", "weighted_sum", "expected_loss")
         predicted = {k: float(np.mean([r["predicted"][k] for r in mine])) for k in keys}
         # the number the selector ranked by (fused with the rollouts when they ran)
         # (None: the executive would never run it, its dry run failed)
@@ -618,7 +645,7 @@ def _alternative_summary(
         "infeasible": sum(r["outcome"] == "infeasible" for r in records if r["alternative"] == name),
         "failures": failures,
         "failure_rate": _rate(failures["any"], n),
-        "failure_rate_by_mode": {m: _rate(failures[m], n) for m in FAILURE_MODES},
+        "failure_rate_by_mode": {m: _rate(failures[m], n) for m in observed_outcomes()},
         "predicted": predicted,
     }
 
@@ -639,7 +666,7 @@ def _forecast_scores(
     brier_by: _ByMode = {}
     ece_by: _ByMode = {}
     observed_by: dict[str, int] = {}
-    for mode, _, p, y in _forecasts(executed):
+    for mode, _, p, y in forecasts(executed):
         observed_by[mode] = int(y.sum())
         auc[mode] = _finite(roc_auc(p, y))
         rate = {
@@ -666,33 +693,37 @@ def _num(x: float | None, fmt: str = ".3f") -> str:
     return "-" if x is None else format(x, fmt)
 
 
-# The per-alternative columns both tables show: (text header, markdown header, text width).
-_COLUMNS = (
-    ("alternative", "alternative", -15),
-    ("trials", "trials", 7),
-    ("P(coll)", "P(collision)", 9),
-    ("P(fall)", "P(fall)", 9),
-    ("P(grasp)", "P(grasp)", 9),
-    ("P(any)", "P(any)", 9),
-    ("exp.loss", "expected loss", 9),
-    ("coll.", "collision", 6),
-    ("fall", "fall", 6),
-    ("drop", "drop", 6),
-    ("unst.", "unstable", 6),
-    ("task", "task", 6),
-    ("t/o", "timeout", 6),
-    ("any", "any failure", 6),
-    ("95% CI", "95% CI", 10),
-)
+def _columns() -> tuple[tuple[str, str, int], ...]:
+    """The per-alternative columns both tables show: (text header, markdown header, text width),
+    from the failure-mode table: each mode's prediction, then each verdict's observed rate."""
+    modes, outcomes_ = failure_modes(), observed_outcomes()
+    return (
+        ("alternative", "alternative", -15),
+        ("trials", "trials", 7),
+        *((f"P({m.abbreviation})", f"P({m.name})", 9) for m in modes),
+        ("P(any)", "P(any)", 9),
+        ("exp.loss", "expected loss", 9),
+        *((_abbreviation(v), v, 6) for v in outcomes_),
+        ("any", "any failure", 6),
+        ("95% CI", "95% CI", 10),
+    )
+
+
+def _abbreviation(verdict: str) -> str:
+    """A verdict's short column header: its mode's (its own if it names the mode), or the outcome's."""
+    mode = mode_of_verdict(verdict)
+    if mode is None:
+        return outcome(verdict).abbreviation
+    return failure_mode(mode).abbreviation if verdict == mode else verdict[:4] + "."
 
 
 def _cells(a: dict[str, Any]) -> list[str]:
-    """One alternative's row of :data:`_COLUMNS` (an infeasible one: why, in the third cell)."""
+    """One alternative's row of :func:`_columns` (an infeasible one: why, in the third cell)."""
     if not a["trials"]:
         return [a["name"], "0", f"infeasible: {a['error'][:80]}"]
     p, f = a["predicted"], a["failure_rate_by_mode"]
-    predicted = [f"{p[k]:.4f}" for k in ("collision", "fall", "grasp", "combined", "expected_loss")]
-    observed = [_pct(f[m]) for m in FAILURE_MODES]
+    predicted = [f"{p[k]:.4f}" for k in (*mode_names(), "combined", "expected_loss")]
+    observed = [_pct(f[m]) for m in observed_outcomes()]
     return [
         a["name"],
         str(a["trials"]),
@@ -705,7 +736,7 @@ def _cells(a: dict[str, Any]) -> list[str]:
 
 def _text_row(cells: Sequence[str]) -> str:
     return "".join(
-        f" {c:>{w}}" if w > 0 else f"{c:<{-w}}" for c, (_, _, w) in zip(cells, _COLUMNS, strict=False)
+        f" {c:>{w}}" if w > 0 else f"{c:<{-w}}" for c, (_, _, w) in zip(cells, _columns(), strict=False)
     )
 
 
@@ -713,7 +744,7 @@ def table_text(summary: dict[str, Any]) -> str:
     """The seed's Table 1, at scale: predicted risk and observed failures per alternative."""
     lines = [
         "predicted (on the estimate)  vs  observed (detectors, in physics)",
-        _text_row([c[0] for c in _COLUMNS]),
+        _text_row([c[0] for c in _columns()]),
     ]
     lines += [_text_row(_cells(a)) for a in summary["alternatives"]]
     auc, b, e = summary["auc"], summary["brier"], summary["ece"]
@@ -736,13 +767,14 @@ def table_text(summary: dict[str, Any]) -> str:
 
 def table_markdown(summary: dict[str, Any]) -> str:
     """:func:`table_text` as markdown tables (for a README or a report)."""
+    columns = _columns()
     rows = [
-        "| " + " | ".join(c[1] for c in _COLUMNS) + " |",
-        "|---|" + "---:|" * (len(_COLUMNS) - 1),
+        "| " + " | ".join(c[1] for c in columns) + " |",
+        "|---|" + "---:|" * (len(columns) - 1),
     ]
     for a in summary["alternatives"]:
         cells = _cells(a)
-        rows.append("| " + " | ".join(cells + [""] * (len(_COLUMNS) - len(cells))) + " |")
+        rows.append("| " + " | ".join(cells + [""] * (len(columns) - len(cells))) + " |")
     auc, b, e = summary["auc"], summary["brier"], summary["ece"]
     rows.append("")
     ceiling = summary["auc_ceiling_per_alternative"]
@@ -771,7 +803,7 @@ def _reliability(records: Sequence[dict[str, Any]], path: Path) -> Path:
     from executive.decision.audit import atomic_replace
     from executive.validation.stats import reliability_diagram
 
-    curves = [(f"{mode} by P({key})", p, y) for mode, key, p, y in _forecasts(_executed(records))]
+    curves = [(f"{mode} by P({key})", p, y) for mode, key, p, y in forecasts(_executed(records))]
     return atomic_replace(path, lambda tmp: reliability_diagram(curves, tmp))
 
 

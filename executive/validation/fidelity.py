@@ -29,7 +29,7 @@ import hashlib
 import json
 import math
 import time
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, TYPE_CHECKING, Any
@@ -39,6 +39,7 @@ import numpy as np
 from executive.decision.audit import atomic_write_text, read_resume_settings
 from executive.errors import ExecutiveError
 from executive.schema.types import Scenario
+from executive.validation.campaign import forecasts
 
 if TYPE_CHECKING:
     from executive.validation.variants import Variant
@@ -52,9 +53,6 @@ __all__ = [
     "table_text",
     "variant_statistics",
 ]
-
-# Each observed failure mode and the predicted probability that forecasts it (as a campaign's).
-FORECASTS = {"collision": "collision", "fall": "fall", "drop": "grasp", "any": "combined"}
 
 
 @dataclass
@@ -355,7 +353,7 @@ def pooled_statistics(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, 
     executed = [r for r in records if r["outcome"] not in ("infeasible", "error")]
     groups = [(r.get("variant"), r["alternative"]) for r in executed]
     out = {}
-    for mode, key, p, y in _forecasts(executed):
+    for mode, key, p, y in forecasts(executed):
         out[mode] = {
             "predicted_by": key,
             "trials": len(y),
@@ -376,15 +374,6 @@ def _group_rates(groups: Sequence[tuple[Any, str]], y: np.ndarray) -> np.ndarray
         sums.setdefault(g, []).append(float(event))
     rate = {g: float(np.mean(v)) for g, v in sums.items()}
     return np.array([rate[g] for g in groups])
-
-
-def _forecasts(
-    executed: Sequence[dict[str, Any]],
-) -> Iterator[tuple[str, str, np.ndarray, np.ndarray]]:
-    for mode, key in FORECASTS.items():
-        p = np.array([r["predicted"][key] for r in executed], dtype=float)
-        y = np.array([r["outcome"] != "success" if mode == "any" else r["outcome"] == mode for r in executed])
-        yield mode, key, p, y.astype(bool)
 
 
 def _regret_overall(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -447,7 +436,7 @@ def _write_outputs(folder: Path, summary: dict[str, Any], records: Sequence[dict
     atomic_write_text(folder / "table.md", table_markdown(summary) + "\n")
     executed = [r for r in records if r["outcome"] not in ("infeasible", "error")]
     if executed:
-        curves = [(f"{mode} by P({key})", p, y) for mode, key, p, y in _forecasts(executed)]
+        curves = [(f"{mode} by P({key})", p, y) for mode, key, p, y in forecasts(executed)]
         title = f"Reliability over {summary['variants_run']} variants of {summary['scenario']}"
         atomic_replace(folder / "reliability.png", lambda tmp: reliability_diagram(curves, tmp, title=title))
 
