@@ -78,7 +78,7 @@ def main(count: int, size: tuple[float, float, float], mass: float) -> None:
     print(f"box {size} m, {mass} kg; {count} sampled truths per alternative")
     for alt in task.alternatives:
         plan = plan_alternative(planner, world, task, alt)
-        drop = assess_plan(world, plan, model).components["grasp"]
+        drop = assess_plan(world, plan, model).components["drop"]
         grasp, hold = float(drop.details["grasp_probability"]), float(drop.details["hold_probability"])
         print(f"{alt}: predicted drop {drop.probability:.3f} (grasp {grasp:.3f}, hold {hold:.3f})")
         exact = run_alternative(scenario, alt, exact=True)

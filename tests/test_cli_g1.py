@@ -47,9 +47,9 @@ def test_validate_and_plan_list_every_alternative(g1_file: Path) -> None:
     for side in ("left", "right"):
         assert rows[side]["feasible"], rows[side]
         risk = rows[side]["risk"]
-        assert 0.0 < risk["grasp"] < 0.3, risk
+        assert 0.0 < risk["drop"] < 0.3, risk
         assert 0.0 <= risk["collision"] < 0.3 and 0.0 <= risk["fall"] < 0.3, risk
-        assert risk["grasp"] <= risk["combined"] <= 1.0
+        assert risk["drop"] <= risk["combined"] <= 1.0
         assert rows[side]["physics"]["dry_run"]["outcome"] == "success"
     assert not rows["left_to_right"]["feasible"]
     assert "Dex3 pinch takes 8.0 cm" in rows["left_to_right"]["error"]

@@ -116,7 +116,7 @@ ROWS = [
         "risk": {
             "collision": 0.0517,
             "fall": 6e-23,
-            "grasp": 0.0499,
+            "drop": 0.0499,
             "combined": 0.099,
             "expected_loss": 0.3326,
         },
@@ -127,7 +127,7 @@ ROWS = [
             "modes": {
                 "collision": {"analytic": 0.0517, "fused": 0.11, "interval": [0.01, 0.29]},
                 "fall": {"analytic": 0.0, "fused": 0.0, "interval": [0.0, 0.0]},
-                "grasp": {"analytic": 0.0499, "fused": 0.04, "interval": [0.0001, 0.2]},
+                "drop": {"analytic": 0.0499, "fused": 0.04, "interval": [0.0001, 0.2]},
             },
         },
     },
@@ -139,7 +139,7 @@ ROWS = [
         "risk": {
             "collision": 0.0145,
             "fall": 0.0,
-            "grasp": 0.0528,
+            "drop": 0.0528,
             "combined": 0.0665,
             "expected_loss": 0.1707,
         },

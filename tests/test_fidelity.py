@@ -298,7 +298,7 @@ def test_the_pooled_auc_ceiling_scores_each_trial_by_its_groups_observed_rate() 
     from executive.validation.fidelity import pooled_statistics
 
     def record(variant: int, outcome: str) -> dict[str, object]:
-        predicted = {"collision": 0.1, "fall": 0.0, "grasp": 0.1, "combined": 0.2, "value": 0.3}
+        predicted = {"collision": 0.1, "fall": 0.0, "drop": 0.1, "combined": 0.2, "value": 0.3}
         return {"variant": variant, "alternative": "left", "outcome": outcome, "predicted": predicted}
 
     records = [record(0, o) for o in ("drop", "drop", "success", "success")]

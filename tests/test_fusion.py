@@ -16,7 +16,7 @@ def _analytic(collision: float, fall: float, grasp: float) -> object:
     reports = [
         RiskReport("collision", collision, (collision, collision), 3.0, 0.0),
         RiskReport("fall", fall, (fall, fall), 10.0, 0.0),
-        RiskReport("grasp", grasp, (grasp, grasp), 2.0, 0.0),
+        RiskReport("drop", grasp, (grasp, grasp), 2.0, 0.0),
     ]
     return combine(reports, RiskConfig())
 
@@ -32,7 +32,7 @@ def test_fused_mean_is_the_posterior_mean_of_a_binomial_with_the_analytic_prior(
     kept = p[rng.binomial(n, p) == k]
     analytic = _analytic(0.01, 0.0, p_a)
     fused = fuse(analytic, {"drop": k, "success": n - k}, n, w, 0.95, RiskConfig())
-    grasp = fused.components["grasp"]
+    grasp = fused.components["drop"]
     se = kept.std() / np.sqrt(kept.size)
     assert grasp.probability == pytest.approx(kept.mean(), abs=4 * se)
     low, high = grasp.probability_bounds
@@ -54,15 +54,15 @@ def test_counts_map_to_their_modes_and_unstable_is_a_fall() -> None:
     post = {m.mode: m for m in posteriors(analytic, counts, 20, 0.0)}
     assert post["collision"].mean == pytest.approx(2 / 20)
     assert post["fall"].mean == pytest.approx(1 / 20)
-    assert post["grasp"].mean == pytest.approx(3 / 20)
+    assert post["drop"].mean == pytest.approx(3 / 20)
     # no prior and no data: the analytic value stands
     assert posteriors(analytic, {}, 0, 0.0)[0].mean == pytest.approx(0.1)
 
 
 def test_choice_confidence_of_two_alternatives_against_quadrature() -> None:
     """P(p_best <= p_other + delta) for independent Beta posteriors, by numerical integration."""
-    a = [ModePosterior("grasp", 3.0, 27.0, 1.0)]
-    b = [ModePosterior("grasp", 9.0, 21.0, 1.0)]
+    a = [ModePosterior("drop", 3.0, 27.0, 1.0)]
+    b = [ModePosterior("drop", 9.0, 21.0, 1.0)]
     delta = 0.02
     best, confidence, cost = choice_confidence({"a": a, "b": b}, "probability", delta, draws=200_000, seed=1)
     exact, _ = integrate.quad(
@@ -83,7 +83,7 @@ def test_choice_confidence_of_two_alternatives_against_quadrature() -> None:
 
 def test_choice_confidence_ranks_by_expected_loss_with_severities() -> None:
     """A likelier but cheap failure against a rarer but costly one: the loss decides."""
-    cheap = [ModePosterior("grasp", 20.0, 80.0, 1.0)]  # 0.20 x 1
+    cheap = [ModePosterior("drop", 20.0, 80.0, 1.0)]  # 0.20 x 1
     costly = [ModePosterior("fall", 10.0, 90.0, 10.0)]  # 0.10 x 10
     best, confidence, _ = choice_confidence({"cheap": cheap, "costly": costly}, "expected_loss", 0.0, seed=3)
     assert best == "cheap" and confidence > 0.95

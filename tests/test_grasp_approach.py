@@ -152,7 +152,7 @@ def test_book_transfer_drop_risk_stays_in_the_observed_range(
 
     scenario, world, plans = book
     model = CollisionModel(world, scenario.risk)
-    drop = {alt: assess_plan(world, plan, model).components["grasp"] for alt, plan in plans.items()}
+    drop = {alt: assess_plan(world, plan, model).components["drop"] for alt, plan in plans.items()}
     for alt, observed in (("left", 0.07), ("right", 0.10)):
         print(
             f"{alt}: P(drop) {drop[alt].probability:.3f}, P(approach) {drop[alt].details['p_approach']:.3f}"

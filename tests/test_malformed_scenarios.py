@@ -261,7 +261,7 @@ SAFETY = [
         "threshold-zero-weights",
         put(
             ("risk.ordering", "weighted_sum"),
-            ("risk.weights", {"collision": 0, "fall": 0, "grasp": 0}),
+            ("risk.weights", {"collision": 0, "fall": 0, "drop": 0}),
             ("risk.threshold", 0),
         ),
         "risk.threshold",

@@ -73,7 +73,7 @@ def test_run_chooses_the_handover_and_places_the_book(tmp_path: Path) -> None:
     (task,) = summary["tasks"]
     assert task["chosen"] == "left_to_right" and task["outcome"] == "success" and task["failure"] is None
     assert task["approval"] is None  # below the threshold: no approval needed
-    assert set(task["risk"]) >= {"collision", "fall", "grasp", "combined", "expected_loss"}
+    assert set(task["risk"]) >= {"collision", "fall", "drop", "combined", "expected_loss"}
     assert summary["placement"][0]["error_m"] < 0.02
     entries = _lines(out)
     kinds = [e["kind"] for e in entries]

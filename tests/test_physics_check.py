@@ -92,8 +92,8 @@ def test_rollouts_are_seeded_and_fused_with_their_counts() -> None:
     cfg = scenario.risk.rollouts
     w, n = cfg.prior_weight, 3
     drops = first.counts.get("drop", 0)
-    p_a = first.analytic.components["grasp"].probability
-    assert first.risk.components["grasp"].probability == pytest.approx((w * p_a + drops) / (w + n))
+    p_a = first.analytic.components["drop"].probability
+    assert first.risk.components["drop"].probability == pytest.approx((w * p_a + drops) / (w + n))
 
 
 def test_plan_cli_shows_the_dry_runs(capsys: pytest.CaptureFixture[str]) -> None:

@@ -29,11 +29,11 @@ def test_plan_json_lists_every_alternative_with_probabilities(tmp_path: Path) ->
     assert sum(a["chosen"] for a in task["alternatives"]) == (1 if feasible else 0)
     for alt in feasible:
         risk = alt["risk"]
-        for key in ("collision", "fall", "grasp", "combined"):
+        for key in ("collision", "fall", "drop", "combined"):
             assert 0.0 <= risk[key] <= 1.0, (alt["name"], key, risk[key])
         lower, upper = risk["combined_bounds"]
         assert lower - 1e-12 <= risk["combined"] <= upper + 1e-12
-        assert max(risk["collision"], risk["fall"], risk["grasp"]) <= risk["combined"] + 1e-12
+        assert max(risk["collision"], risk["fall"], risk["drop"]) <= risk["combined"] + 1e-12
         assert (tmp_path / "task0" / f"{alt['name']}_com.png").is_file()
         assert (tmp_path / "task0" / f"{alt['name']}_distance.png").is_file()
     chosen = next(a for a in feasible if a["chosen"])

@@ -354,11 +354,14 @@ def test_the_g1_presses_with_its_dex3_hand(g1_mjcf: Path) -> None:
 def test_a_failed_press_is_a_task_failure_not_a_fall() -> None:
     """A press that cannot reach or hold its force did not do its task; no risk mode predicts
     that and the robot is standing: campaigns and rollouts must not count it as a fall."""
+    from behaviours.gripper import Release
     from executive.execution.runner import behaviour_failure
-    from executive.risk.fusion import OBSERVED_AS
+    from executive.risk.fusion import observed_as
+    from executive.schema.failure_modes import mode_names, mode_of_verdict
 
-    failure = behaviour_failure("press: force 3.1 N below 15 N - 1.5 N at t=2.0 s", 2.0)
-    assert failure is not None and failure.mode == "task"
-    assert not any("task" in modes for modes in OBSERVED_AS.values())
-    assert behaviour_failure("drop: hand closed but does not hold", 1.0).mode == "drop"  # type: ignore[union-attr]
-    assert behaviour_failure("lost track of the trajectory", 1.0) is None
+    press = Release("press", "left", "book")  # Press fails through RobotBehaviour.fail, as every behaviour
+    assert press.fail("task", "press: force 3.1 N below 15 N - 1.5 N at t=2.0 s").name == "FAILURE"
+    failure = behaviour_failure(press, 2.0)
+    assert failure.mode == "task" and failure.detail.startswith("press: force 3.1 N")
+    assert mode_of_verdict("task") is None
+    assert not any("task" in observed_as(m) for m in mode_names())

@@ -96,7 +96,7 @@ def assessed(tmp_path: Path, mass: float) -> tuple[Scenario, AlternativeRisk]:
 def test_a_light_push_slides_the_book_to_its_target(tmp_path: Path) -> None:
     scenario, left = assessed(tmp_path, 0.6)
     assert left.risk is not None and left.plan is not None
-    fall, drop = left.risk.components["fall"], left.risk.components["grasp"]
+    fall, drop = left.risk.components["fall"], left.risk.components["drop"]
     assert fall.details["max_external_force"] == pytest.approx(1.0 * 0.6 * 9.81, rel=1e-6)  # mu m g
     # The ZMP moves back by F h / (m g), h the hand's height over the floor (Kajita et al.), 4 mm,
     # and the CoM with it as the servos give (0.1 mm/N): 4.5 mm.
@@ -135,7 +135,7 @@ def test_a_heavy_push_falls_short_and_the_robot_stands(tmp_path: Path) -> None:
     most the arm can exert, 170 N, against the 196 N that would take the ZMP to the heels)."""
     scenario, left = assessed(tmp_path, 20.0)
     assert left.risk is not None
-    fall, drop = left.risk.components["fall"], left.risk.components["grasp"]
+    fall, drop = left.risk.components["fall"], left.risk.components["drop"]
     needed = float(fall.details["max_external_force"])
     assert needed == pytest.approx(20.0 * 9.81, rel=1e-6)
     limit, tip = float(fall.details["arm_force_limit"]), float(fall.details["force_to_tip"])
@@ -159,7 +159,7 @@ def test_the_light_push_predicts_and_shows_no_fall(tmp_path: Path) -> None:
     outcomes = rollouts(scenario, left, 3)
     assert outcomes.count("fall") == 0 and outcomes.count("collision") == 0, outcomes
     assert left.risk.components["fall"].probability < 1e-6
-    drop = left.risk.components["grasp"]
+    drop = left.risk.components["drop"]
     room = 0.02 - 5.886 / float(drop.details["hand_stiffness"])  # the place tolerance less the shortfall
     landed = normal_cdf(-3.0)  # nearer than its estimate by more than the 3-sigma descent gap
     across = 2.0 * normal_cdf(-room / 0.01)  # off the push line by more than the room left

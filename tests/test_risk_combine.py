@@ -20,7 +20,7 @@ def report(mode: str, p: float, severity: float, seed: float) -> RiskReport:
 def test_closed_form_values() -> None:
     cfg = RiskConfig()  # weights collision 1, fall 2, grasp 1
     total = combine(
-        [report("collision", 0.2, 3.0, 0.5), report("fall", 0.1, 10.0, 0.4), report("grasp", 0.05, 2.0, 0.1)],
+        [report("collision", 0.2, 3.0, 0.5), report("fall", 0.1, 10.0, 0.4), report("drop", 0.05, 2.0, 0.1)],
         cfg,
     )
     assert total.probability == pytest.approx(1 - 0.8 * 0.9 * 0.95)  # 0.316

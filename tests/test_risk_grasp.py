@@ -415,7 +415,7 @@ def test_an_error_along_the_jaws_is_carried_to_the_target_and_one_across_them_is
     assert rest[0] == pytest.approx(-0.015, abs=0.004)
     assert abs(rest[1]) < 0.003
 
-    grasp = assess_plan(world, plan, CollisionModel(world, scenario.risk)).components["grasp"]
+    grasp = assess_plan(world, plan, CollisionModel(world, scenario.risk)).components["drop"]
     tol = DetectorThresholds().place_position_tol
     sigma = scenario.uncertainty.object_position
     assert grasp.details["lateral_tolerance"] == pytest.approx(tol)

@@ -264,7 +264,7 @@ def test_drop_mode_is_the_union_of_grasp_and_hold(heavy: tuple[World, Alternativ
     risk = assess_plan(
         world, plan, CollisionModel(world, world.scenario.risk, uncertainty=world.scenario.uncertainty)
     )
-    drop = risk.components["grasp"]
+    drop = risk.components["drop"]
     pg, ph = float(drop.details["grasp_probability"]), float(drop.details["hold_probability"])
     assert drop.probability == pytest.approx(1.0 - (1.0 - pg) * (1.0 - ph), abs=1e-12)
     assert drop.probability_bounds[0] <= drop.probability <= drop.probability_bounds[1]

@@ -48,6 +48,7 @@ VOCABULARY = [
     "risk",
     "weights",
     "fall",
+    "drop",
     "grasp",
     "approval",
     "mode",

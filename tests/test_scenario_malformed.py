@@ -210,7 +210,7 @@ CASES = [
         "risk.collision.exponet",
         "did you mean 'exponent'?",
     ),
-    Case("unknown-weight", put("risk.weights", {"grab": 1.0}), "risk.weights.grab", "did you mean 'grasp'?"),
+    Case("unknown-weight", put("risk.weights", {"dorp": 1.0}), "risk.weights.dorp", "did you mean 'drop'?"),
     Case(
         "unknown-key-no-suggestion",
         put("trials.zzz", 1),
