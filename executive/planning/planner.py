@@ -144,7 +144,7 @@ class Planner:
         Returns:
             The geom pairs (built once per request, then kept).
         """
-        return self.problem.collision_pairs(carried, allow_contact)
+        return self.problem.collisions.pairs(carried, allow_contact)
 
     def required_clearance(self, pairs: Sequence[tuple[int, int]]) -> FloatArray:
         """Clearance (m) each pair must keep: an obstacle's own ``clearance`` against that
@@ -156,7 +156,7 @@ class Planner:
         Returns:
             The clearance of each pair (m).
         """
-        return self.problem.required_clearance(pairs)
+        return self.problem.collisions.required_clearance(pairs)
 
     # --- planning ---------------------------------------------------------------------------
 
@@ -247,7 +247,7 @@ class Planner:
         self._check_request(q_start, targets, carried)
         conf = self.configuration
         conf.update(np.array(q_start, dtype=float))
-        allowed = problem.allowed_geoms(allow_contact)
+        allowed = problem.collisions.allowed_geoms(allow_contact)
         goals = hand_routes(model, conf.data, ids, targets, carried, allowed, cfg.via_clearance)
         qp = problem.move_qp(conf, goals, carried, allow_contact, rest, posture)
         clearance0 = qp.collisions.distances(conf.data)

@@ -2,7 +2,8 @@
 
 :class:`PlanningProblem` is built once per world (by :class:`~executive.planning.planner.Planner`):
 it sorts the robot's joints into groups, builds mink's tasks and the planner's limits on them,
-and the geom groups the collision limit keeps apart. :meth:`PlanningProblem.move_qp` sets the
+and holds the geom pairs the collision limit keeps apart
+(:class:`~executive.planning.collision_pairs.CollisionPairs`). :meth:`PlanningProblem.move_qp` sets the
 tasks for one move and gathers that move's QP (:class:`MoveQP`), which
 :class:`~executive.planning.ik_loop.IKLoop` steps through.
 """
@@ -17,6 +18,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.planning.collision_pairs import CollisionPairs
 from executive.planning.limits import (
     GeomPairCollisionLimit,
     JointBounds,
@@ -24,11 +26,10 @@ from executive.planning.limits import (
     SupportPolygon,
     SupportPolygonLimit,
     TiltLimit,
-    geom_pairs,
 )
 from executive.planning.types import PlannerConfig, PlanningInputError, Relative, body_pose, site_pose
 from executive.robot.posture import standing_pelvis_height
-from executive.world.model import World, is_descendant
+from executive.world.model import World
 
 __all__ = ["PELVIS_QP_MARGIN", "MoveQP", "PlanningProblem"]
 
@@ -111,13 +112,7 @@ class PlanningProblem:
         self.joints = JointBounds(model, velocity, frozen)
         self._safe_posture_limits()
         self.foot_geoms = [g for s in sorted(ids.foot_geoms) for g in ids.foot_geoms[s]]
-        self._pairs: dict[tuple[tuple[str, str] | None, tuple[str, ...]], list[tuple[int, int]]] = {}
-        # The collision limit of each (carried, allow_contact), with its pairs' required clearance:
-        # both depend on the model and the configuration only, so they are built once.
-        self._limits: dict[
-            tuple[tuple[str, str] | None, tuple[str, ...]], tuple[GeomPairCollisionLimit, FloatArray]
-        ] = {}
-        self._collision_groups()
+        self.collisions = CollisionPairs(world, config)
 
     def _joint_name(self, joint: int) -> str:
         return str(mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_JOINT, joint))
@@ -216,95 +211,6 @@ class PlanningProblem:
         self.pelvis = PelvisHeightLimit(model, ids.base_body, self.pelvis_floor + PELVIS_QP_MARGIN)
         self.base_z_adr = int(model.jnt_qposadr[model.body_jntadr[ids.base_body]]) + 2
 
-    def _collision_groups(self) -> None:
-        """Geom groups: each arm's subtree, the rest of the body, and the environment."""
-        model, ids = self.model, self.world.ids
-        self.arm_geoms: dict[str, list[int]] = {}
-        for side in self.sides:
-            root = int(model.jnt_bodyid[ids.arm_joints[side][0]])
-            subtree = {b for b in ids.robot_bodies if is_descendant(model, b, root)}
-            self.arm_geoms[side] = [g for g in ids.robot_geoms if int(model.geom_bodyid[g]) in subtree]
-        in_arms = {g for gs in self.arm_geoms.values() for g in gs}
-        self.body_geoms = [g for g in ids.robot_geoms if g not in in_arms]
-        self.static_env = [g for g in ids.table_geoms] + list(ids.obstacle_geoms.values())
-        self.geom_names = {
-            str(mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)): g
-            for g in range(model.ngeom)
-            if mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_GEOM, g)
-        }
-
-    def collision_pairs(
-        self, carried: tuple[str, str] | None = None, allow_contact: Sequence[str] = ()
-    ) -> list[tuple[int, int]]:
-        """Geom pairs the planner keeps apart for a move (after ``allow_contact`` is removed).
-
-        Built once per (carried, allow_contact) and kept: the groups depend on the model only.
-        """
-        key = (carried, tuple(allow_contact))
-        cached = self._pairs.get(key)
-        if cached is None:
-            cached = self._pairs[key] = self._collision_pairs(carried, allow_contact)
-        return list(cached)
-
-    def _collision_pairs(
-        self, carried: tuple[str, str] | None, allow_contact: Sequence[str]
-    ) -> list[tuple[int, int]]:
-        ids = self.world.ids
-        allowed = self.allowed_geoms(allow_contact)
-        carried_geom = ids.object_geoms[carried[1]] if carried else None
-        objects = [g for g in ids.object_geoms.values() if g != carried_geom]
-        env = self.static_env + objects
-        groups: list[tuple[Sequence[int], Sequence[int]]] = []
-        for side in self.sides:
-            groups += [(self.arm_geoms[side], env), (self.arm_geoms[side], self.body_geoms)]
-        for i, a in enumerate(self.sides):
-            for b in self.sides[i + 1 :]:
-                groups.append((self.arm_geoms[a], self.arm_geoms[b]))
-        if carried is not None and carried_geom is not None:
-            others = [g for s in self.sides if s != carried[0] for g in self.arm_geoms[s]]
-            groups.append(([carried_geom], env + self.body_geoms + others))
-        return [p for p in geom_pairs(self.model, groups) if not allowed & set(p)]
-
-    def required_clearance(self, pairs: Sequence[tuple[int, int]]) -> FloatArray:
-        """Clearance (m) each pair must keep: an obstacle's own ``clearance`` against that
-        obstacle, ``table_distance`` against the table, else ``min_distance``."""
-        table = set(self.world.ids.table_geoms)
-        geoms = self.world.ids.obstacle_geoms
-        own = {
-            geoms[b.name]: b.clearance
-            for b in self.world.scenario.scene.obstacles
-            if b.clearance is not None and geoms.get(b.name, -1) >= 0
-        }
-        cfg = self.config
-
-        def required(a: int, b: int) -> float:
-            for g in (a, b):
-                if g in own:
-                    return float(own[g])
-            return cfg.table_distance if table & {a, b} else cfg.min_distance
-
-        return np.array([required(a, b) for a, b in pairs], dtype=float)
-
-    def allowed_geoms(self, allow_contact: Sequence[str]) -> set[int]:
-        """The geoms named in ``allow_contact``.
-
-        Args:
-            allow_contact: geom names.
-
-        Returns:
-            Their geom ids.
-
-        Raises:
-            PlanningInputError: when a name is no geom of the model.
-        """
-        return {self._geom(n) for n in allow_contact}
-
-    def _geom(self, name: str) -> int:
-        if name not in self.geom_names:
-            valid = ", ".join(sorted(self.geom_names))
-            raise PlanningInputError(f"allow_contact names no geom '{name}'; geoms are: {valid}")
-        return self.geom_names[name]
-
     # --- one move's QP ----------------------------------------------------------------------
 
     def move_qp(
@@ -336,7 +242,7 @@ class PlanningProblem:
         polygon = SupportPolygon.from_feet(model, conf.data, self.foot_geoms)
         self.com.set_target(np.array([*polygon.centre, 0.0]))
         attach, relative = self._attachment(conf.data, carried)
-        collisions, required = self.collision_limit(carried, allow_contact, attach)
+        collisions, required = self.collisions.limit(carried, allow_contact, attach)
         # Keep a small extra margin in the QP so that interpolated knots stay inside the checked one.
         margin = self.config.support_margin + 0.002
         balance = SupportPolygonLimit(model, self.world.ids.base_body, polygon, margin)
@@ -391,47 +297,3 @@ class PlanningProblem:
             site_pose(data, ids.hand_sites[side]).inverse() @ body_pose(data, ids.object_bodies[obj]),
         )
         return attach, relative
-
-    def collision_limit(
-        self, carried: tuple[str, str] | None, allow_contact: Sequence[str], attach: dict[int, int]
-    ) -> tuple[GeomPairCollisionLimit, FloatArray]:
-        """The collision limit of (carried, allow_contact) and its pairs' required clearance (m),
-        built on first use and kept (both depend on the model and the request only).
-
-        Args:
-            carried: (hand side, object name) of a carried object.
-            allow_contact: names of geoms the robot may touch.
-            attach: a carried object's geom -> its hand's body (used when the limit is built).
-
-        Returns:
-            The collision limit and its pairs' required clearance (m).
-        """
-        key = (carried, tuple(allow_contact))
-        if key not in self._limits:
-            cfg = self.config
-            pairs = self.collision_pairs(carried, allow_contact)
-            required = self.required_clearance(pairs)
-            self._limits[key] = (
-                GeomPairCollisionLimit(
-                    self.model,
-                    pairs,
-                    # As for the balance: a little extra in the QP keeps the interpolated knots clear.
-                    required + cfg.clearance_tolerance,
-                    _detection_distance(cfg, required),
-                    cfg.collision_gain,
-                    attach,
-                    cfg.collision_recovery,
-                ),
-                required,
-            )
-        return self._limits[key]
-
-
-def _detection_distance(cfg: PlannerConfig, required: FloatArray) -> float:
-    """The collision limit's detection distance: the configured one, widened for an obstacle's
-    own clearance above ``min_distance`` so that its pairs enter the QP as far beyond their
-    clearance as the others do."""
-    widest = float(np.max(required, initial=0.0))
-    if widest <= cfg.min_distance:
-        return cfg.detection_distance
-    return max(cfg.detection_distance, widest + cfg.detection_distance - cfg.min_distance)
