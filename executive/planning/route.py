@@ -1,4 +1,4 @@
-"""Via points over obstacles for a hand's straight-line move.
+"""A hand's way to its target: via points over obstacles, and the lead of its task along the way.
 
 Differential IK with collision avoidance (mink's velocity dampers) slides along
 an obstacle, but stops dead when the target lies straight behind it (the
@@ -7,19 +7,25 @@ planners lift over such obstacles; so does this helper: it sweeps the hand's
 footprint (and that of a carried object) along the straight line from start to
 target and, where that footprint overlaps an obstacle's footprint below the
 obstacle's top, returns two via points at a clearance height, one before and
-one after the obstacle.
+one after the obstacle. :func:`hand_routes` gives each moving hand its route (the via points,
+then the target); :func:`lead` points each hand's task a bounded step ahead along it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
+import mink
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["Footprint", "footprint", "via_points"]
+from executive.planning.rotation import rotation_log
+from executive.planning.types import HandTarget, PlannerConfig, se3, site_quat
+from executive.world.model import WorldIds
+
+__all__ = ["Footprint", "footprint", "hand_routes", "lead", "via_points", "world_box"]
 
 FloatArray = NDArray[np.float64]
 
@@ -112,3 +118,85 @@ def via_points(
     if any(np.any(_hits(over, extent, lo, hi, clearance - 1e-6)) for lo, hi in obstacles):
         return []
     return [before, after]
+
+
+def hand_routes(
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    ids: WorldIds,
+    targets: Sequence[HandTarget],
+    carried: tuple[str, str] | None,
+    allowed: set[int],
+    clearance: float,
+) -> dict[str, list[mink.SE3]]:
+    """Per moving hand: via points over the obstacles and objects in its way, then its target.
+
+    Args:
+        model: the planner's model.
+        data: its data at the move's start.
+        ids: the world's indices.
+        targets: one target per moving hand.
+        carried: (hand side, object name) of a carried object, which moves with that hand.
+        allowed: geoms the hands may touch (not in the way).
+        clearance: the footprint's clearance above (or below) what it passes (m).
+
+    Returns:
+        Each moving hand's goals (side -> poses), the target last.
+    """
+    carried_geom = ids.object_geoms[carried[1]] if carried else None
+    blockers = [
+        g
+        for g in [*ids.obstacle_geoms.values(), *ids.object_geoms.values()]
+        if g not in allowed and g != carried_geom
+    ]
+    boxes = [world_box(model, data, g) for g in blockers]
+    routes: dict[str, list[mink.SE3]] = {}
+    for t in targets:
+        site = ids.hand_sites[t.side]
+        moving = [g for g in ids.robot_geoms if int(model.geom_bodyid[g]) in ids.hand_bodies[t.side]]
+        if carried is not None and carried[0] == t.side and carried_geom is not None:
+            moving.append(carried_geom)
+        extent = footprint(model, data, site, moving)
+        start = data.site_xpos[site].copy()
+        vias = via_points(start, np.asarray(t.position, dtype=float), extent, boxes, clearance)
+        routes[t.side] = [se3(v, t.quat) for v in vias] + [se3(t.position, t.quat)]
+    return routes
+
+
+def lead(
+    hands: Mapping[str, mink.FrameTask],
+    data: mujoco.MjData,
+    hand_sites: Mapping[str, int],
+    goals: Mapping[str, mink.SE3],
+    cfg: PlannerConfig,
+) -> None:
+    """Point each hand task at most ``lead_distance`` / ``lead_angle_rad`` ahead of the hand.
+
+    The hand then follows the straight line (and the shortest rotation) to its goal,
+    while the balance and posture tasks keep up, instead of lunging at a far goal
+    with whatever joints are cheapest and curving back later.
+
+    Args:
+        hands: the hands' frame tasks by side; those in ``goals`` get a new target.
+        data: the configuration's data (the hands' current poses).
+        hand_sites: each hand's site id by side.
+        goals: each moving hand's current goal by side.
+        cfg: the planner's configuration (its lead distance and angle).
+    """
+    for side, goal in goals.items():
+        site = hand_sites[side]
+        position, quat = data.site_xpos[site], site_quat(data, site)
+        delta = goal.wxyz_xyz[4:] - position
+        turn = rotation_log(quat, goal.wxyz_xyz[:4])  # hand to goal, in the hand frame
+        dist, ang = float(np.linalg.norm(delta)), float(np.linalg.norm(turn))
+        alpha = min(1.0, cfg.lead_distance / max(dist, 1e-12), cfg.lead_angle_rad / max(ang, 1e-12))
+        if alpha >= 1.0:
+            hands[side].set_target(goal)
+            continue
+        # mink.SO3.exp and the product, with the same MuJoCo routines mink uses.
+        axis = alpha * turn
+        theta = mujoco.mju_normalize3(axis)
+        step, rotation = np.empty(4), np.empty(4)
+        mujoco.mju_axisAngle2Quat(step, axis, theta)
+        mujoco.mju_mulQuat(rotation, quat, step)
+        hands[side].set_target(mink.SE3(np.concatenate([rotation, position + alpha * delta])))
