@@ -39,7 +39,8 @@ class CollisionSetup:
     env_sigma: environment body id -> horizontal 1-sigma (m); missing means exact.
     part_factors: robot body id -> (body part, severity factor) (``Severity.body_parts``).
     hand_geoms: side -> robot geoms of the hand subtree.
-    support_geoms: the geoms objects rest on (the table's), for :meth:`CollisionModel.support_allow`.
+    support_geoms: the geoms objects rest on (the table's), for
+        :meth:`executive.risk.collision_pairs.CollisionPairs.support_allow`.
     env_clearance: environment body id -> its own ``d_safety`` (m) (an obstacle's ``clearance``);
         missing: ``risk.d_safety``.
     env_severity: environment body id -> its own collision severity (an obstacle's ``severity``);
