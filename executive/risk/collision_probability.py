@@ -1,11 +1,13 @@
 """First-order collision probability under horizontal pose errors of the environment bodies.
 
-Split out of :mod:`executive.risk.collision` (which re-exports every name); see its module doc
-for the model. To first order along coal's witness normal ``n`` (from the environment geom to
-the robot geom), shifting a body by ``delta`` changes a distance by ``-n . delta``, so one pair
-collides with ``P = Phi(-d / sqrt(n^T Sigma n))``; per knot the pairs of one body share its shift,
-bodies are independent, and over a trajectory the one static shift per body makes the union over
-knots an exact 2-D Gaussian integral per body (polar form; Craig 1991 for one half-plane).
+:func:`collision_probability` turns the near pairs of every knot (:class:`NearPair`, from
+:class:`executive.risk.collision_model.CollisionModel`) into P(collision) over the trajectory,
+per knot and per body, with the union bounds. To first order along coal's witness normal ``n``
+(from the environment geom to the robot geom), shifting a body by ``delta`` changes a distance
+by ``-n . delta``, so one pair collides with ``P = Phi(-d / sqrt(n^T Sigma n))``; per knot the
+pairs of one body share its shift, bodies are independent, and over a trajectory the one static
+shift per body makes the union over knots an exact 2-D Gaussian integral per body (polar form;
+Craig 1991 for one half-plane). Re-exported by :mod:`executive.risk.collision`.
 """
 
 from __future__ import annotations
@@ -77,7 +79,7 @@ def _union_by_group(
     starts = np.flatnonzero(np.r_[True, g[1:] != g[:-1]])
     sizes = np.diff(np.r_[starts, len(g)])
     # A group of one event is one half-plane: P = Phi(-h) in closed form (what the quadrature
-    # below approximates, to ~1e-12 with 720 angles).
+    # below approximates).
     single = starts[sizes == 1]
     out[g[single]] = ndtr(-hh[single])
     multi = np.repeat(sizes > 1, sizes)

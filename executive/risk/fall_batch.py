@@ -1,7 +1,8 @@
 """The fall model's per-knot quantities for many knots at once (numpy over knots).
 
-Same formulas as :mod:`executive.risk.fall` (see its module doc for the sources), arranged so a
-trajectory of K knots costs a few array operations instead of K Python-level calls:
+Same formulas as :mod:`executive.risk.gaussian_polygon` and :mod:`executive.risk.fall_support`
+(see their module docs for the sources), arranged so a trajectory of K knots costs a few array
+operations instead of K Python-level calls:
 
 * support polygons: the convex hull (Andrew's monotone chain, :func:`executive.world.polygon.convex_hull`)
   of one knot is reused for the next knots as long as it is still their hull: the same point
@@ -132,7 +133,8 @@ def signed_margin_batch(v: FloatArray, x: FloatArray) -> FloatArray:
 
 
 def edge_probabilities_batch(v: FloatArray, mu: FloatArray, cov: FloatArray) -> FloatArray:
-    """:func:`executive.risk.fall.edge_probabilities` for polygons v (n, m, 2), means mu (n, 2)."""
+    """:func:`executive.risk.gaussian_polygon.edge_probabilities` for polygons v (n, m, 2),
+    means mu (n, 2)."""
     a, b = halfplanes_batch(v)
     slack = b - np.einsum("nij,nj->ni", a, mu)
     var = np.einsum("nij,jk,nik->ni", a, cov, a)
@@ -143,7 +145,8 @@ def edge_probabilities_batch(v: FloatArray, mu: FloatArray, cov: FloatArray) -> 
 
 
 def probability_outside_batch(v: FloatArray, mu: FloatArray, cov: FloatArray) -> FloatArray:
-    """:func:`executive.risk.fall.probability_outside` (Owen's T) for polygons v (n, m, 2), means mu (n, 2).
+    """:func:`executive.risk.gaussian_polygon.probability_outside` (Owen's T) for polygons v (n, m, 2),
+    means mu (n, 2).
 
     Whitened by the Cholesky factor of ``cov``; with the mean strictly inside the tails beyond
     the edges are summed (T(h, s_b/h) - T(h, s_a/h)), otherwise 1 - the signed triangles' mass.
