@@ -142,10 +142,10 @@ def grasp_tolerance(
     extent across the jaws (the pads must land on it); yaw: the largest rotation at which the
     object still fits between the open jaws, w cos t + L sin t <= opening (pi/2 if it always
     fits, 0 if it never does). jaw_opening None: the sum over the gripper's actuators of
-    (open - closed) when they drive slide joints measured from touching pads (the bundled
-    humanoid: 2 x 0.085 m); for any other hand (the G1's Dex3) the free span between its
-    open thumb and fingers across the site, measured on the model
-    (:func:`executive.risk.hand_span.hand_span`).
+    (open - closed) when they drive slide joints measured from touching pads; for any other
+    hand (the G1's Dex3) the free span between its open thumb and fingers across the site,
+    measured on the model (:func:`executive.risk.hand_span.hand_span`). See
+    docs/hold_and_grasp.md.
     """
     model = world.model
     if side not in world.profile.arms:
