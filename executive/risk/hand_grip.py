@@ -21,6 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.risk.hand_span import FAN_HALF_WIDTH, hand_collision_geoms, posed_hand
+from executive.risk.model_geometry import geom_points
 from executive.world.model import World
 
 __all__ = ["Chain", "Squeeze", "dexterous_squeeze", "hand_chains", "pinch_centre"]
@@ -56,20 +57,6 @@ class Squeeze:
     width: float
     force: float
     chains: tuple[Chain, ...]
-
-
-def _mesh_points(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> FloatArray:
-    """World positions of a geom's mesh vertices (its bounding box's corners for a primitive)."""
-    rot = data.geom_xmat[geom].reshape(3, 3)
-    if model.geom_type[geom] == mujoco.mjtGeom.mjGEOM_MESH:
-        mesh = int(model.geom_dataid[geom])
-        start, count = int(model.mesh_vertadr[mesh]), int(model.mesh_vertnum[mesh])
-        local = np.asarray(model.mesh_vert[start : start + count], dtype=float)
-    else:
-        centre, half = model.geom_aabb[geom, :3], model.geom_aabb[geom, 3:]
-        signs = np.array([[i, j, k] for i in (-1.0, 1.0) for j in (-1.0, 1.0) for k in (-1.0, 1.0)])
-        local = centre + signs * half
-    return np.asarray(data.geom_xpos[geom] + local @ rot.T, dtype=float)
 
 
 def _site_frame(world: World, data: mujoco.MjData, side: str) -> tuple[FloatArray, FloatArray]:
@@ -153,11 +140,11 @@ def hand_chains(world: World, side: str) -> tuple[Chain, ...]:
         own = [g for g in geoms if int(model.geom_bodyid[g]) in bodies]
         if not own:
             continue
-        centre = np.mean(np.vstack([_mesh_points(model, open_data, g) for g in own]), axis=0)
+        centre = np.mean(np.vstack([geom_points(model, open_data, g) for g in own]), axis=0)
         thumb = float((centre - o_origin) @ o_frame[:, 1]) < 0.0
         best: tuple[float, int, FloatArray] | None = None
         for g in own:
-            local = (_mesh_points(model, data, g) - origin) @ frame
+            local = (geom_points(model, data, g) - origin) @ frame
             local = local[(local[:, 2] >= 0.0) & (np.abs(local[:, 0]) <= FAN_HALF_WIDTH)]
             if not len(local):
                 continue

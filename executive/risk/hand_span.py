@@ -17,13 +17,13 @@ Usage::
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.risk.model_geometry import geom_corners
 from executive.world.model import World
 
 __all__ = ["HandSpan", "hand_collision_geoms", "hand_span", "posed_hand"]
@@ -86,14 +86,6 @@ def posed_hand(world: World, side: str, targets: tuple[float, ...] | None = None
     return data
 
 
-def _corners(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> FloatArray:
-    """World corners (8, 3) of a geom's local bounding box (the box itself for a box geom)."""
-    centre, half = model.geom_aabb[geom, :3], model.geom_aabb[geom, 3:]
-    signs = np.array(list(itertools.product((-1.0, 1.0), repeat=3)))
-    rot = data.geom_xmat[geom].reshape(3, 3)
-    return np.asarray(data.geom_xpos[geom] + (centre + signs * half) @ rot.T, dtype=float)
-
-
 def _ray(
     model: mujoco.MjModel, data: mujoco.MjData, geoms: list[int], start: FloatArray, way: FloatArray
 ) -> float:
@@ -131,7 +123,7 @@ def hand_span(world: World, side: str, *, closed: bool = False) -> HandSpan:
     frame = data.site_xmat[site].reshape(3, 3)
     closing, approach, lateral = frame[:, 1].copy(), frame[:, 2].copy(), frame[:, 0].copy()
     geoms = hand_collision_geoms(world, side)
-    corners = np.vstack([_corners(model, data, g) for g in geoms])
+    corners = np.vstack([geom_corners(model, data, g) for g in geoms])
     depth = max(float(np.max((corners - origin) @ approach)), 0.0)
     # Parallel rays through the region an object between the jaws fills: across the site's
     # lateral axis (x) and down its approach axis to the fingertips; each side's nearest hit.

@@ -24,8 +24,9 @@ import math
 import numpy as np
 from numpy.typing import ArrayLike
 
-from executive.risk.grasp import half_extent, has_slide_jaws
+from executive.risk.grasp_tolerance import has_slide_jaws
 from executive.risk.hand_grip import pinch_centre
+from executive.risk.model_geometry import half_extent
 from executive.world.model import World
 
 __all__ = ["closing_shift", "horizontal_shift", "placement_tolerance"]
