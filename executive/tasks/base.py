@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from executive.schema.types import Task
+from executive.tasks.subtree import build_subtree
 
 if TYPE_CHECKING:
     import py_trees
@@ -108,8 +109,6 @@ class TaskKind(abc.ABC):
 
     def subtree(self, plan: AlternativePlan, *, guard: bool = False) -> py_trees.behaviour.Behaviour:
         """The alternative's behaviour subtree (default: one behaviour per step, in order)."""
-        from executive.tasks.steps import build_subtree
-
         return build_subtree(plan, guard=guard)
 
     def verify(self, task: Task, world: World, detector: FailureDetector) -> Verdict | None:
