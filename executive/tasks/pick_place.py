@@ -79,6 +79,7 @@ class PickKind(TaskKind):
 
     name = "pick"
     alternative_names = ONE_HAND
+    leaves_held = True
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``pick: {object, alternatives: [left, right]}``."""
@@ -175,6 +176,7 @@ class PlaceKind(TaskKind):
 
     name = "place"
     alternative_names = ONE_HAND
+    needs_held = True
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``place: {object, to: [x, y(, z)], to_yaw (deg), alternatives}``."""
