@@ -1,7 +1,8 @@
 """The folders show the data flow: the package graph has no cycle, behaviours import nothing above them.
 
 Every import counts, including those only for type checking and those inside
-functions: each is a dependency a reader has to follow.
+functions: each is a dependency a reader has to follow. Within a package, no module
+imports itself back either (the module graph has no cycle).
 """
 
 from __future__ import annotations
@@ -81,6 +82,70 @@ def test_the_package_graph_has_no_cycle() -> None:
 def test_the_cycle_finder_finds_a_cycle() -> None:
     assert _cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
     assert _cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+
+
+def _module_name(root: Path, path: Path) -> str:
+    parts = path.relative_to(root).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _import_targets(node: ast.AST, package: str, modules: set[str]) -> list[str]:
+    """The names ``node`` imports: a relative import resolved from ``package``, ``from pkg import
+    name`` as ``pkg.name`` when that is one of ``modules``, else as ``pkg``."""
+    if isinstance(node, ast.Import):
+        return [alias.name for alias in node.names]
+    if not isinstance(node, ast.ImportFrom):
+        return []
+    source = node.module or ""
+    if node.level:
+        parts = package.split(".")
+        source = ".".join([*parts[: len(parts) - (node.level - 1)], *([source] if source else [])])
+    return [f"{source}.{a.name}" if f"{source}.{a.name}" in modules else source for a in node.names]
+
+
+def _module_graph(root: Path, paths: list[Path]) -> dict[str, set[str]]:
+    """Which of the modules at ``paths`` (under ``root``) imports which: every import counts
+    (top level, under TYPE_CHECKING, inside functions); a dotted name stands for the longest
+    prefix of it that is one of the modules (``import a.b.c`` for ``a.b`` when ``c`` is a name)."""
+    files = {_module_name(root, p): p for p in paths}
+
+    def known(name: str) -> str:
+        while name and name not in files:
+            name = name.rpartition(".")[0]
+        return name
+
+    graph: dict[str, set[str]] = {}
+    for module, path in files.items():
+        package = module if path.name == "__init__.py" else module.rpartition(".")[0]
+        targets = [
+            known(target)
+            for node in ast.walk(ast.parse(path.read_text()))
+            for target in _import_targets(node, package, set(files))
+        ]
+        graph[module] = set(targets) - {"", module}
+    return graph
+
+
+def test_no_module_imports_itself_back() -> None:
+    """A function-level import of a module that imports you back is a cycle too."""
+    graph = _module_graph(ROOT, [*ROOT.glob("executive/**/*.py"), *ROOT.glob("behaviours/*.py")])
+    assert {"executive.tasks.base", "executive.tasks.registry"} <= graph["executive.tasks.steps"]
+    cycle = _cycle(graph)
+    assert cycle is None, "modules import each other: " + " -> ".join(cycle or [])
+
+
+def test_the_module_graph_sees_every_import(tmp_path: Path) -> None:
+    package = tmp_path / "pkg"
+    package.mkdir()
+    (package / "__init__.py").write_text("")
+    (package / "a.py").write_text("from pkg import b, helper\n")
+    (package / "b.py").write_text("def f():\n    from . import a\n")
+    (package / "c.py").write_text(
+        "from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    import pkg.a.name\n"
+    )
+    graph = _module_graph(tmp_path, sorted(package.glob("*.py")))
+    assert graph == {"pkg": set(), "pkg.a": {"pkg", "pkg.b"}, "pkg.b": {"pkg.a"}, "pkg.c": {"pkg.a"}}
+    assert _cycle(graph) == ["pkg.a", "pkg.b", "pkg.a"]
 
 
 def test_behaviours_import_nothing_that_imports_them() -> None:

@@ -241,11 +241,11 @@ def test_the_worker_process_plans_and_the_ticks_only_swap_its_results_in(
     chosen alternative's guards have their planned knots from the worker: the ticks compute none
     while it executes."""
     import executive.decision.planning_job as planning_job
-    import executive.tasks.steps as steps
+    import executive.tasks.base as kinds
 
     planned_here: list[int] = []
     built_at: list[int] = []
-    real_assess, real_build = planning_job.assess_task, steps.build_subtree
+    real_assess, real_build = planning_job.assess_task, kinds.build_subtree
 
     def assess_spy(*args: Any, **kwargs: Any) -> Any:
         planned_here.append(1)
@@ -256,7 +256,7 @@ def test_the_worker_process_plans_and_the_ticks_only_swap_its_results_in(
         return real_build(plan, **kwargs)
 
     monkeypatch.setattr(planning_job, "assess_task", assess_spy)
-    monkeypatch.setattr(steps, "build_subtree", build_spy)
+    monkeypatch.setattr(kinds, "build_subtree", build_spy)  # TaskKind.subtree's default
     executive = Executive("book_transfer", approval="auto", truth="exact")
     monitor = executive.monitor
     assert monitor is not None and executive.planning is not None

@@ -10,6 +10,7 @@ test uses, so each case imports it afresh.
 
 from __future__ import annotations
 
+import ast
 import importlib
 import shutil
 import sys
@@ -46,6 +47,18 @@ def plugin_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.setattr(registry, "_registered", {})
     importlib.invalidate_caches()
     return tmp_path
+
+
+def test_the_example_imports_only_the_plugin_facade() -> None:
+    """A plug-in kind needs nothing of the package but executive.plugin, which has all it exports."""
+    import executive.plugin
+
+    tree = ast.parse(EXAMPLE.read_text())
+    modules = {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)} | {
+        a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names
+    }
+    assert {m for m in modules if m.split(".")[0] == "executive"} == {"executive.plugin"}
+    assert all(hasattr(executive.plugin, name) for name in executive.plugin.__all__)
 
 
 def _install_entry_point(folder: Path) -> None:

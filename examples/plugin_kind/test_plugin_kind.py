@@ -16,12 +16,11 @@ import numpy as np
 import yaml
 from wave_kind import WaveKind, WaveTask
 
-import executive
 from executive.execution.runner import execute_plan
 from executive.planning.planner import Planner
+from executive.plugin import plan_alternative, register
 from executive.scenario import from_dict
 from executive.schema.catalog import scenario_path
-from executive.tasks.steps import plan_alternative
 from executive.world.model import build
 
 AT = (0.42, -0.20)  # over the table, right of the book stack's front
@@ -35,7 +34,7 @@ def _doc() -> dict[str, Any]:
 
 
 def test_wave_plans_and_runs() -> None:
-    executive.register(WaveKind)
+    register(WaveKind)
     scenario = from_dict(_doc())
     task = scenario.mission[0]
     assert isinstance(task, WaveTask) and task.alternatives == ("right",)

@@ -15,7 +15,8 @@ comes home; nothing is touched. Register it with an entry point in your package'
     wave = "wave_kind:WaveKind"
 
 or by its dotted path in the YAML (the module on ``sys.path``), or in code with
-``executive.register(WaveKind)``. See docs/task_kinds.md.
+``executive.plugin.register(WaveKind)``. It imports only from :mod:`executive.plugin`, the
+facade for plug-in kinds. See docs/task_kinds.md.
 """
 
 from __future__ import annotations
@@ -24,13 +25,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from executive.planning.plan import CompositionConfig, Step
-from executive.schema.readers import over_table
-from executive.schema.types import SceneConfig
-from executive.schema.yaml_nodes import Node
-from executive.tasks.base import Alternative, Task, TaskKind
-from executive.tasks.hands import HandFrames
-from executive.world.model import World
+from executive.plugin import (
+    Alternative,
+    CompositionConfig,
+    HandFrames,
+    Node,
+    SceneConfig,
+    Step,
+    Task,
+    TaskKind,
+    World,
+    over_table,
+)
 
 __all__ = ["WaveKind", "WaveTask"]
 

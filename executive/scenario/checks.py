@@ -10,7 +10,9 @@
 * the table, a task's object or its target far outside the robot's reach (the reach measured in
   the robot's MJCF, :mod:`executive.robot.model`; ``REACH_SLACK`` beyond it);
 * a task between a pick and the place of the object it picked (not supported: the physics
-  checks and the detectors follow one object in hand, that task's own).
+  checks and the detectors follow one object in hand, that task's own). What a task leaves
+  in hand or needs there is its kind's ``leaves_held`` / ``needs_held``
+  (:class:`executive.tasks.base.TaskKind`).
 
 Types and ranges are the readers' job (:mod:`executive.schema.readers`); this module assumes
 they passed. It is called at the end of :func:`executive.scenario.load` and friends.
@@ -30,6 +32,7 @@ from executive.robot.model import RobotFacts
 from executive.schema.readers import over_table, vertical_half_extent
 from executive.schema.types import Body, Scenario, Table
 from executive.schema.yaml_nodes import Node
+from executive.tasks.registry import get as task_kind
 
 __all__ = ["OVERLAP_TOLERANCE", "REACH_SLACK", "REST_TOLERANCE", "check_scene"]
 
@@ -78,22 +81,26 @@ def check_scene(root: Node, scenario: Scenario, facts: RobotFacts | None) -> Non
         if getattr(task, "to", None) is not None:
             placed = _check_target(root, f"mission[{t}].{task.kind}", task, scenario, now, obstacles)
             now = [*(o for o in now if o.name != task.object), placed]
-        elif task.kind == "pick":
+        elif task_kind(task.kind).leaves_held:
             now = [o for o in now if o.name != task.object]
 
 
 def _check_in_hand(root: Node, scenario: Scenario) -> None:
-    """Fail at a task that comes after a pick and before the place of the object picked."""
-    picked: tuple[int, str] | None = None  # (task index, object) in hand
+    """Fail at a task that comes after a pick and before the place of the object picked.
+
+    A pick is a task whose kind ``leaves_held`` its object, a place one whose kind ``needs_held`` it.
+    """
+    picked: tuple[str, str] | None = None  # (key path of the pick, object) in hand
     for t, task in enumerate(scenario.mission):
-        if picked is not None and not (task.kind == "place" and task.object == picked[1]):
+        kind = task_kind(task.kind)
+        if picked is not None and not (kind.needs_held and task.object == picked[1]):
             _fail(
                 root,
                 f"mission[{t}].{task.kind}",
-                f"'{picked[1]}' is still in hand (picked by mission[{picked[0]}].pick): only its "
+                f"'{picked[1]}' is still in hand (picked by {picked[0]}): only its "
                 "place may come next; a task while an object is held is not supported",
             )
-        picked = (t, task.object) if task.kind == "pick" else None
+        picked = (f"mission[{t}].{task.kind}", task.object) if kind.leaves_held else None
 
 
 def _placed(

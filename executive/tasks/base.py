@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from executive.schema.types import Task
+from executive.tasks.subtree import build_subtree
 
 if TYPE_CHECKING:
     import py_trees
@@ -57,11 +58,19 @@ class TaskKind(abc.ABC):
 
     Subclasses set ``name`` (the YAML key) and ``alternative_names`` (every name an
     alternative of this kind can have, documented and stable), and implement
-    :meth:`read`, :meth:`offered` and :meth:`steps`.
+    :meth:`read`, :meth:`offered` and :meth:`steps`. Two flags say what a task of the kind
+    leaves in a hand, for the checks of a whole mission (both False unless set):
+
+    * ``leaves_held``: the task ends with its ``object`` still in a hand (a ``pick``); the next
+      task must be one that ``needs_held`` that object;
+    * ``needs_held``: the task starts with its ``object`` in the hand an earlier task left it
+      in (a ``place``).
     """
 
     name: ClassVar[str] = ""
     alternative_names: ClassVar[tuple[str, ...]] = ()
+    leaves_held: ClassVar[bool] = False
+    needs_held: ClassVar[bool] = False
 
     @abc.abstractmethod
     def read(self, node: Node, scene: SceneConfig) -> Task:
@@ -108,8 +117,6 @@ class TaskKind(abc.ABC):
 
     def subtree(self, plan: AlternativePlan, *, guard: bool = False) -> py_trees.behaviour.Behaviour:
         """The alternative's behaviour subtree (default: one behaviour per step, in order)."""
-        from executive.tasks.steps import build_subtree
-
         return build_subtree(plan, guard=guard)
 
     def verify(self, task: Task, world: World, detector: FailureDetector) -> Verdict | None:

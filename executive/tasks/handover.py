@@ -19,6 +19,7 @@ from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import PlanningError
 from executive.tasks.hands import UP, HandFrames, yaw_of
 from executive.tasks.phases import grasp_height, pick, place
+from executive.tasks.placement import Destination, target_placement
 from executive.world.model import World
 
 __all__ = ["Exchange", "exchange", "transfer"]
@@ -177,14 +178,13 @@ def _receiver_turn(
     return steps
 
 
-def transfer(world: World, task: object, giver: str, receiver: str, cfg: CompositionConfig) -> list[Step]:
+def transfer(
+    world: World, task: Destination, giver: str, receiver: str, cfg: CompositionConfig
+) -> list[Step]:
     """The steps of a transfer by handover: giver picks and brings it over, exchange, receiver places.
 
-    ``task``: a :class:`executive.tasks.transfer.TransferTask`.
+    ``task``: what to put where (a :class:`executive.tasks.transfer.TransferTask`).
     """
-    from executive.tasks.transfer import TransferTask, target_placement
-
-    assert isinstance(task, TransferTask)
     obj = task.object
     check_symmetry(world, obj, f"{giver}_to_{receiver}")
     h = HandFrames(world)

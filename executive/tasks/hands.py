@@ -17,10 +17,12 @@ from executive.planning.planner import HandTarget
 from executive.planning.types import site_quat
 from executive.world.model import World
 
-__all__ = ["HandFrames", "top_down_quat", "yaw_of"]
+__all__ = ["ONE_HAND", "UP", "HandFrames", "top_down_quat", "yaw_of"]
 
 FloatArray = NDArray[np.float64]
 UP = np.array([0.0, 0.0, 1.0])
+#: The hands, by side: the names of the alternatives that use one of them.
+ONE_HAND = ("left", "right")
 
 
 def top_down_quat(yaw: float) -> FloatArray:

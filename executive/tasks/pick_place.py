@@ -22,9 +22,9 @@ from executive.planning.planner import PlanningError
 from executive.schema.types import Body, SceneConfig
 from executive.schema.yaml_nodes import Node
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict
-from executive.tasks.hands import UP, HandFrames, yaw_of
+from executive.tasks.hands import ONE_HAND, UP, HandFrames, yaw_of
 from executive.tasks.phases import carry_lane_front, grasp_height, lane_carry, pick, place
-from executive.tasks.transfer import ONE_HAND, placed_verdict, target_placement
+from executive.tasks.placement import placed_verdict, target_placement
 from executive.world.model import World
 
 __all__ = ["PickKind", "PickTask", "PlaceKind", "PlaceTask", "held_verdict", "holder_of"]
@@ -79,6 +79,7 @@ class PickKind(TaskKind):
 
     name = "pick"
     alternative_names = ONE_HAND
+    leaves_held = True
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``pick: {object, alternatives: [left, right]}``."""
@@ -175,6 +176,7 @@ class PlaceKind(TaskKind):
 
     name = "place"
     alternative_names = ONE_HAND
+    needs_held = True
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``place: {object, to: [x, y(, z)], to_yaw (deg), alternatives}``."""

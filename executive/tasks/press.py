@@ -32,6 +32,7 @@ from executive.schema.types import SceneConfig
 from executive.schema.yaml_nodes import Node
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict
 from executive.tasks.hands import HandFrames
+from executive.tasks.subtree import build_subtree
 from executive.world.model import World
 
 if TYPE_CHECKING:
@@ -154,7 +155,6 @@ class PressKind(TaskKind):
         The hand closes (a fist) as the first motion starts and opens again as it goes home.
         """
         from behaviours.press import Press, SetGripper
-        from executive.tasks.steps import build_subtree
 
         task = plan.task
         assert isinstance(task, PressTask)

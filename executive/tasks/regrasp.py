@@ -25,6 +25,7 @@ from executive.schema.readers import over_table
 from executive.schema.types import Body
 from executive.tasks.hands import HandFrames, yaw_of
 from executive.tasks.phases import one_hand_leg
+from executive.tasks.placement import Destination, target_placement
 from executive.world.model import World
 
 __all__ = ["REGRASPS", "Spot", "midway_spot", "transfer"]
@@ -162,17 +163,14 @@ def _nearest(
     return None
 
 
-def transfer(world: World, task: object, first: str, second: str, cfg: CompositionConfig) -> list[Step]:
+def transfer(world: World, task: Destination, first: str, second: str, cfg: CompositionConfig) -> list[Step]:
     """The steps of a transfer by regrasp: ``first`` sets the object down midway, ``second`` places it.
 
-    ``task``: a :class:`executive.tasks.transfer.TransferTask`.
+    ``task``: what to put where (a :class:`executive.tasks.transfer.TransferTask`).
 
     Raises:
         PlanningError: no free spot to set the object down (the reason says what is in the way).
     """
-    from executive.tasks.transfer import TransferTask, target_placement
-
-    assert isinstance(task, TransferTask)
     body = next(b for b in world.scenario.scene.objects if b.name == task.object)
     pos, quat = world.object_pose(task.object)
     target = target_placement(world, body, task.to, task.to_yaw_rad, 0.0)

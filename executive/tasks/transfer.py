@@ -26,18 +26,19 @@ import numpy as np
 
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import HandTarget, PlanningError
-from executive.schema.types import Body, SceneConfig
+from executive.schema.types import SceneConfig
 from executive.schema.yaml_nodes import Node
 from executive.tasks import handover as handover_steps
 from executive.tasks import regrasp as regrasp_steps
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict
-from executive.tasks.hands import HandFrames, yaw_of
+from executive.tasks.hands import ONE_HAND, HandFrames, yaw_of
 from executive.tasks.phases import one_hand_leg
+from executive.tasks.pick_place import PlaceTask, place_steps, site_offset
+from executive.tasks.placement import placed_verdict, target_placement
 from executive.world.model import World
 
-__all__ = ["HANDOVERS", "ONE_HAND", "REGRASPS", "TransferKind", "TransferTask", "transfer_steps"]
+__all__ = ["HANDOVERS", "REGRASPS", "TransferKind", "TransferTask", "transfer_steps"]
 
-ONE_HAND = ("left", "right")
 HANDOVERS = ("left_to_right", "right_to_left")
 REGRASPS = tuple(regrasp_steps.REGRASPS)
 
@@ -55,29 +56,6 @@ class TransferTask(Task):
     def label(self) -> str:
         to = ", ".join(f"{v:.2f}" for v in self.to if v is not None)
         return f"transfer {self.object} to ({to})"
-
-
-@dataclass(frozen=True)
-class Placement:
-    """Where an object goes: its centre, its yaw, the hand site's height above its centre."""
-
-    centre: np.ndarray
-    yaw: float
-    site_above_centre: float
-
-
-def target_placement(
-    world: World,
-    body: Body,
-    to: tuple[float, float, float | None],
-    yaw: float | None,
-    site_above_centre: float,
-) -> Placement:
-    """The placement of ``body`` at ``to`` (z None: resting on the table), yaw None: ``body``'s current."""
-    scene = world.scenario.scene
-    z = to[2] if to[2] is not None else scene.table.height + body.half_height()
-    _, quat = world.object_pose(body.name)
-    return Placement(np.array([to[0], to[1], z]), yaw if yaw is not None else yaw_of(quat), site_above_centre)
 
 
 class TransferKind(TaskKind):
@@ -117,8 +95,6 @@ class TransferKind(TaskKind):
     def steps(self, task: Task, world: World, alternative: str, config: CompositionConfig) -> list[Step]:
         assert isinstance(task, TransferTask)
         if world.held_by(task.object) == alternative:
-            from executive.tasks.pick_place import PlaceTask, place_steps
-
             # No yaw asked: the yaw it had in the scene (not the one the hand has turned it to).
             body = next(b for b in world.scenario.scene.objects if b.name == task.object)
             yaw = task.to_yaw_rad if task.to_yaw_rad is not None else body.orientation_rad[2]
@@ -145,22 +121,6 @@ class TransferKind(TaskKind):
 HANDOVERS_SIDES = {"left_to_right": ("left", "right"), "right_to_left": ("right", "left")}
 
 
-def placed_verdict(
-    world: World, detector: object, obj: str, to: tuple[float, float, float | None], to_yaw: float | None
-) -> Verdict | None:
-    """The detector's verdict on ``obj`` resting at ``to`` (None: no detector that can tell)."""
-    check = getattr(detector, "check_placed", None)
-    if check is None:
-        return None
-    body = next(b for b in world.scenario.scene.objects if b.name == obj)
-    yaw = to_yaw if to_yaw is not None else body.orientation_rad[2]
-    found = check(obj, (to[0], to[1]), yaw, body.yaw_symmetry)
-    if found is None:
-        return Verdict(True, "placed", {"object": obj, "target": list(to)})
-    fields = {"mode": found.mode, "detail": found.detail, "behaviour": "placement", "time": found.time}
-    return Verdict(False, "failure", fields, found)
-
-
 def one_hand_steps(world: World, task: TransferTask, side: str, cfg: CompositionConfig) -> list[Step]:
     """Pick, carry across the body in the lane in front of what is in the way, place, home.
 
@@ -178,8 +138,6 @@ def others_home(world: World, obj: str, holder: str, cfg: CompositionConfig) -> 
 
     After a failed handover the receiver's open hand is still at the object.
     """
-    from executive.tasks.pick_place import site_offset
-
     h = HandFrames(world)
     pos, quat = world.object_pose(obj)
     grip = world.grips.get(obj)

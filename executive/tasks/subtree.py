@@ -1,0 +1,99 @@
+"""The behaviour subtree of a planned alternative: one task-level behaviour per step.
+
+:func:`build_subtree` turns an :class:`executive.planning.plan.AlternativePlan` into a
+py_trees Sequence: a mover per motion step (each may be wrapped in a live risk guard), a
+gripper behaviour per grasp and release, and a handover (receiver grasps, giver releases,
+giver retreats) as its own subtree. It is the default of
+:meth:`executive.tasks.base.TaskKind.subtree`; a kind with steps of its own passes their
+behaviours in ``make``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+
+import py_trees
+
+from executive.planning.plan import AlternativePlan, Step
+
+__all__ = ["build_subtree"]
+
+
+def build_subtree(
+    plan: AlternativePlan,
+    *,
+    guard: bool = False,
+    make: Mapping[str, Callable[[Step], py_trees.behaviour.Behaviour]] | None = None,
+) -> py_trees.composites.Sequence:
+    """The alternative as a py_trees Sequence of task-level behaviours (a handover is its own subtree).
+
+    ``guard``: wrap every motion in a :class:`behaviours.guard.RiskGuard` (live risk checks,
+    active when a monitor is on the blackboard). ``make``: a task kind's own behaviour for
+    steps of a kind of its own (a press), by step kind.
+    """
+    from behaviours.gripper import Grasp, Release
+    from behaviours.guard import RiskGuard
+    from behaviours.handover import handover_subtree
+    from behaviours.move_hand import Carry, Home, Lift, MoveHand, Place, Retreat
+    from behaviours.push import Push
+
+    movers = {
+        "move": MoveHand,
+        "lift": Lift,
+        "carry": Carry,
+        "place": Place,
+        "retreat": Retreat,
+        "home": Home,
+        "push": Push,
+    }
+    children: list[py_trees.behaviour.Behaviour] = []
+    steps = list(plan.steps)
+    i = 0
+    while i < len(steps):
+        step = steps[i]
+        if make is not None and step.kind in make:
+            children.append(make[step.kind](step))
+            i += 1
+            continue
+        if step.kind == "grasp" and i + 2 < len(steps) and steps[i + 1].kind == "release":
+            # receiver grasps, giver releases, giver retreats: the handover
+            release, retreat = steps[i + 1], steps[i + 2]
+            children.append(
+                handover_subtree(
+                    f"{release.side}_to_{step.side}.handover",
+                    giver=release.side,
+                    receiver=step.side,
+                    obj=step.obj,
+                    retreat=plan.trajectories[retreat.name],
+                )
+            )
+            i += 3
+            continue
+        if step.kind == "grasp":
+            children.append(Grasp(step.name, step.side, step.obj))
+        elif step.kind == "release":
+            children.append(Release(step.name, step.side, step.obj))
+        else:
+            # After a release the open jaws may still brush the object they let go of.
+            let_go = step.obj or (step.allow_contact[0] if step.allow_contact else "")
+            touching = (step.side, let_go) if step.kind in ("retreat", "home", "push") and let_go else None
+            # The move onto a grasp: the open jaws must straddle the object, not land on it.
+            after = steps[i + 1] if i + 1 < len(steps) else None
+            onto_grasp = after is not None and after.kind == "grasp" and after.side == step.side
+            approaching = (step.side, after.obj) if after is not None and onto_grasp else None
+            mover = movers[step.kind](
+                step.name, plan.trajectories[step.name], touching=touching or None, approaching=approaching
+            )
+            children.append(
+                RiskGuard(
+                    mover,
+                    side=step.side,
+                    kind=step.kind,
+                    obj=plan.task.object,
+                    allow_contact=step.allow_contact,
+                )
+                if guard
+                else mover
+            )
+        i += 1
+    return py_trees.composites.Sequence(name=plan.name, memory=True, children=children)
