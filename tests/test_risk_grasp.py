@@ -165,7 +165,7 @@ def test_assess_grasp_known_truth(estimate: World) -> None:
     hand = _top_down_hand_over(estimate, "book")
     pos, quat = estimate.object_pose("book")
     ok = assess_grasp(estimate, "left", "book", hand, RiskConfig(), Uncertainty(), object_pose=(pos, quat))
-    assert ok.mode == "grasp" and ok.probability == 0.0 and ok.probability_bounds == (0.0, 0.0)
+    assert ok.mode == "drop" and ok.probability == 0.0 and ok.probability_bounds == (0.0, 0.0)
     assert ok.seed_score == pytest.approx(seed_grasp_risk(0.0, 0.0, CFG))
     assert ok.severity == RiskConfig().severity.drop
     off = assess_grasp(

@@ -119,7 +119,7 @@ def assess_grasp(
     lower, upper = union_bounds(p_axes)
     cfg = risk_config.grasp
     return RiskReport(
-        mode="grasp",
+        mode="drop",  # the grasp model is one half of the drop mode (the hold model the other)
         probability=float(np.clip(independent_union(p_axes), lower, upper)),
         probability_bounds=(lower, upper),
         severity=float(risk_config.severity.drop),

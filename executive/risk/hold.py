@@ -340,12 +340,12 @@ def assess_hold(world: World, plan: object, risk_config: RiskConfig, uncertainty
     """
     severity = risk_config.severity.drop
     if not getattr(getattr(plan, "task", None), "object", ""):  # a task that holds nothing (a press)
-        return RiskReport("hold", 0.0, (0.0, 0.0), severity, 0.0, details={"hold_model": "nothing held"})
+        return RiskReport("drop", 0.0, (0.0, 0.0), severity, 0.0, details={"hold_model": "nothing held"})
     try:
         problem = hold_problem(world, plan)
     except HoldModelUnavailable as exc:
         details: dict[str, float | str] = {"hold_model": f"unavailable: {exc}"}
-        return RiskReport("hold", 0.0, (0.0, 1.0), severity, 0.0, details=details)
+        return RiskReport("drop", 0.0, (0.0, 1.0), severity, 0.0, details=details)
     p, missed = hold_probability(world, problem, uncertainty)
     slides = all(
         world.model.jnt_type[int(world.model.actuator_trnid[a, 0])] == mujoco.mjtJoint.mjJNT_SLIDE
@@ -358,4 +358,4 @@ def assess_hold(world: World, plan: object, risk_config: RiskConfig, uncertainty
     }
     details["hold_probability"] = p
     details["hold_receiver_miss_probability"] = missed
-    return RiskReport("hold", p, (p, p), severity, p, details=details)
+    return RiskReport("drop", p, (p, p), severity, p, details=details)
