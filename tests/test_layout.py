@@ -15,6 +15,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 MAX_FUNCTION_LINES = 80
+MAX_CLASS_LINES = 400
+MAX_MODULE_LINES = 700
 
 
 def _package_of(path: Path) -> str:
@@ -176,6 +178,36 @@ def test_no_library_function_is_longer_than_80_lines() -> None:
                 if lines > MAX_FUNCTION_LINES:
                     long.append(f"{path.relative_to(ROOT)}:{node.lineno} {node.name} ({lines} lines)")
     assert not long, "\n".join(long)
+
+
+def _too_long(paths: list[Path]) -> list[str]:
+    """Modules over MAX_MODULE_LINES and classes over MAX_CLASS_LINES, one line each."""
+    long = []
+    for path in paths:
+        text = path.read_text()
+        if (n := len(text.splitlines())) > MAX_MODULE_LINES:
+            long.append(
+                f"{path.relative_to(ROOT) if path.is_relative_to(ROOT) else path}: module of {n} lines"
+            )
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.ClassDef):
+                lines = (node.end_lineno or node.lineno) - node.lineno + 1
+                if lines > MAX_CLASS_LINES:
+                    long.append(f"{path.name}:{node.lineno} class {node.name} ({lines} lines)")
+    return long
+
+
+def test_no_class_over_400_lines_and_no_module_over_700() -> None:
+    long = _too_long([*ROOT.glob("executive/**/*.py"), *ROOT.glob("behaviours/*.py")])
+    assert not long, "split along its seams:\n" + "\n".join(long)
+
+
+def test_the_size_check_sees_a_long_class_and_a_long_module(tmp_path: Path) -> None:
+    body = "\n".join(f"    x{i} = {i}" for i in range(MAX_CLASS_LINES))
+    (tmp_path / "big.py").write_text(f'"""Big."""\n\n\nclass Big:\n{body}\n' + "\n" * MAX_MODULE_LINES)
+    (tmp_path / "small.py").write_text('"""Small."""\n\n\nclass Small:\n    x = 1\n')
+    found = _too_long([tmp_path / "big.py", tmp_path / "small.py"])
+    assert len(found) == 2 and "class Big (401 lines)" in found[1] and "module of" in found[0]
 
 
 def test_every_module_says_what_it_is() -> None:

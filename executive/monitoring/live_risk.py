@@ -15,34 +15,8 @@ The allowances are the planner's and the risk model's (a hand may touch the obje
 it grasps; a carried object its support while lifted or placed), so a planned
 contact does not trip the guard.
 
-An obstacle with its own ``clearance`` c (the planner keeps c from it) has its own distance
-limit, :func:`obstacle_guard_limits`: ``max(c - min_distance, c / 2)``, the planner's clearance
-less the same tracking allowance the defaults give (the planner keeps 2 cm, the guard trips at
-1 cm), never below half of c, so it is never 0. The guard compares ``d - limit + min_distance``
-with ``min_distance`` (the closest pair chosen by that shifted distance,
-:meth:`CollisionModel.knot`'s ``shift``), and reports the pair's own distance and limit.
-
-Cost per tick
--------------
-The distance at the measured configuration is re-evaluated on every check: exactly, or
-by a certified lower bound from the last exact one and how far each moving geom has
-moved since (:meth:`LiveRiskMonitor._now_distance`), used only when it clears the limit,
-so the guard trips exactly when the exact distance would make it trip. A planned
-knot's distance is a function of the knot (its full qpos, objects included), the
-carried object, the allowances and the estimate's geometry only, so it is
-memoised per planned trajectory, and dropped as a whole when the estimate's
-geometry changes (``body_pos``, ``body_quat``, ``geom_pos``, ``geom_quat``,
-``geom_size`` of the model, compared on every check). A moved obstacle therefore
-reaches every look-ahead knot on the very next check (and forces an exact distance now).
-:meth:`LiveRiskMonitor.prepare` fills the memo for a whole trajectory ahead of time (the
-selector calls it in its planning thread), so a tick computes at most the measured
-configuration's distance.
-The CoM margin is likewise a certified lower bound while the foot contacts are the same
-pairs as at the last exact margin (:meth:`LiveRiskMonitor.com_margin`), used only when it
-clears the limit. An exact margin picks the foot contacts out in one pass
-(:func:`contact_support_margin`); a CoM clearly inside the support is measured without
-building the hull (:func:`interior_margin`, exact), anything else by the fall model's hull
-and margin (:mod:`executive.world.polygon`). What each part costs: README, "What a tick costs".
+An obstacle with its own ``clearance`` has its own limit (:func:`obstacle_guard_limits`).
+How a tick stays cheap (certified lower bounds, the per-trajectory memo): docs/live_guards.md.
 """
 
 from __future__ import annotations
