@@ -130,5 +130,6 @@ class RiskGuard(py_trees.decorators.Decorator):
             return status
         self.tripped = verdict
         robot.hold()  # safe hold where the robot is, before anything else
-        self.feedback_message, self.verdict = verdict.reason, "guard"
+        self.feedback_message = verdict.reason
+        self.verdict = "guard"
         return Status.FAILURE

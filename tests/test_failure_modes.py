@@ -180,3 +180,34 @@ def test_without_the_added_mode_nothing_shows_it() -> None:
     data["risk"] = {"severity": {"slow": 1.0}}
     with pytest.raises(ExecutiveError, match=r"risk\.severity\.slow"):
         from_dict(data)
+
+
+def _verdicts_in_source() -> dict[str, set[str]]:
+    """Every verdict literal the code returns: ``Failure("x", ...)``, ``self.fail("x", ...)``,
+    ``self.verdict = "x"`` in executive/ and behaviours/, with the files that say it."""
+    import ast
+
+    root = Path(__file__).resolve().parent.parent
+    found: dict[str, set[str]] = {}
+    for path in [*root.glob("executive/**/*.py"), *root.glob("behaviours/*.py")]:
+        for node in ast.walk(ast.parse(path.read_text())):
+            literal = None
+            if isinstance(node, ast.Call) and node.args and isinstance(node.args[0], ast.Constant):
+                func = node.func
+                if (isinstance(func, ast.Name) and func.id == "Failure") or (
+                    isinstance(func, ast.Attribute) and func.attr == "fail" and path.parts[-2] == "behaviours"
+                ):
+                    literal = node.args[0].value
+            elif isinstance(node, ast.Assign) and isinstance(node.value, ast.Constant):
+                if any(isinstance(t, ast.Attribute) and t.attr == "verdict" for t in node.targets):
+                    literal = node.value.value or None
+            if isinstance(literal, str):
+                found.setdefault(literal, set()).add(path.name)
+    return found
+
+
+def test_every_verdict_the_code_returns_is_in_the_table() -> None:
+    found = _verdicts_in_source()
+    assert {"collision", "fall", "unstable", "drop", "tracking", "guard", "task"} <= set(found), found
+    unknown = {v: files for v, files in found.items() if v not in verdict_names()}
+    assert not unknown, f"verdicts the failure-mode table does not know: {unknown}"
