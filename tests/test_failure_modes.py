@@ -97,7 +97,7 @@ def test_the_old_name_of_the_drop_mode_still_reads_with_a_warning() -> None:
 
 
 def test_an_ordering_is_a_registry_entry_the_loader_and_the_selector_read() -> None:
-    assert ordering_names() == ("weighted_sum", "probability", "expected_loss")
+    assert ordering_names() == ("weighted_sum", "probability", "expected_loss", "loss_and_time")
     data = bundled_dict()
     data["risk"] = {"ordering": "fall_first", "threshold": 0.1}
     with pytest.raises(ExecutiveError, match="fall_first"):

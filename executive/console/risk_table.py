@@ -13,6 +13,8 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from executive.risk.orderings import ordering as ordering_named
+from executive.risk.orderings import ordering_names
 from executive.schema.failure_modes import failure_modes, mode_names
 
 __all__ = ["number", "physics_table", "ranked", "risk_table", "verdict_line"]
@@ -59,16 +61,16 @@ def risk_table(rows: Sequence[Mapping[str, Any]], ordering: str, threshold: floa
     """Markdown: one line per alternative, ranked, with each failure mode's probability.
 
     Columns: rank, alternative, each failure mode's (executive.schema.failure_modes), P(any), expected loss,
-    and the seed's weighted sum when that is the ordering; the ordering's column is marked
-    ``!`` where it is above the threshold. Infeasible alternatives follow with their reason.
+    and the ordering's own value when it is another (the seed's weighted sum, loss and time;
+    :mod:`executive.risk.orderings`); the ordering's column is marked ``!`` where it is above
+    the threshold. Infeasible alternatives follow with their reason.
     """
-    columns = {"probability": "combined", "expected_loss": "expected_loss", "weighted_sum": "weighted_sum"}
     keys = [*mode_names(), "combined", "expected_loss"]
     heads = [*(m.label for m in failure_modes()), "P(any)", "exp. loss"]
-    if ordering == "weighted_sum":
-        keys.append("weighted_sum")
-        heads.append("seed sum")
-    ranked_key = columns.get(ordering)
+    ranked_key = ordering_named(ordering).key if ordering in ordering_names() else ""
+    if ranked_key and ranked_key not in keys:
+        keys.append(ranked_key)
+        heads.append(ordering_named(ordering).label)
     lines = ["| # | alternative | " + " | ".join(heads) + " |", "|---|---|" + "---|" * len(heads)]
     for i, row in enumerate(ranked(rows), 1):
         risk = row.get("risk")

@@ -125,7 +125,7 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
     pushes = plan_forces(world, plan, scenario.uncertainty)  # the reaction of a push moves the ZMP
     external = pushes if pushes is not None else press_forces(plan)  # or a press's
     context = PlanContext(world, plan, collision_model, whole, pushes, external)
-    return combine([risk_model(mode)(context) for mode in mode_names()], scenario.risk)
+    return combine([risk_model(mode)(context) for mode in mode_names()], scenario.risk, plan.duration)
 
 
 def _fall_model(ctx: PlanContext) -> RiskReport:

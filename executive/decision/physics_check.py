@@ -339,7 +339,8 @@ def _choice(
         p.name: posteriors(results[p.name].analytic, results[p.name].counts, n, cfg.prior_weight)
         for p in plans
     }
-    choice = choice_confidence(candidates, risk.ordering, cfg.indifference, seed=n)
+    offsets = {p.name: results[p.name].analytic.time_loss for p in plans}
+    choice = choice_confidence(candidates, risk.ordering, cfg.indifference, seed=n, offsets=offsets)
     return choice.confidence, choice.opportunity_cost
 
 

@@ -76,6 +76,7 @@ def risk_table(
         f"{'':2}{'alternative':<15}"
         + "".join(f"{m.label:>10}" for m in failure_modes())
         + f"{'P(any)':>10}{'seed sum':>10}{'exp. loss':>10}{'min dist':>10}{'min CoM':>9}"
+        + (f"{'time loss':>10}{'loss+time':>10}" if scenario.risk.loss_per_second else "")
     )
     lines = [f"task {task_label} (ranked by {ordering}; threshold {scenario.risk.threshold})", head]
     for i, alt in enumerate(alternatives):
@@ -92,6 +93,11 @@ def risk_table(
             + "".join(f"{c[m].probability:>10.4f}" for m in mode_names())
             + f"{r.probability:>10.4f}{r.weighted_sum:>10.3f}{r.expected_loss:>10.4f}"
             + f"{dist * 1000:>8.1f}mm{margin * 1000:>7.1f}mm"
+            + (
+                f"{r.time_loss:>10.4f}{r.expected_loss + r.time_loss:>10.4f}"
+                if scenario.risk.loss_per_second
+                else ""
+            )
         )
         breach = breach_summary(c["collision"])
         if breach is not None:
@@ -144,6 +150,9 @@ def risk_json(scenario: Scenario, tasks: Sequence[tuple[str, Sequence[Alternativ
                     "expected_loss": float(r.expected_loss),
                     "seed": {m: float(r.components[m].seed_score) for m in mode_names()},
                 }
+                if scenario.risk.loss_per_second:  # the time a way takes costs (ordering loss_and_time)
+                    row["risk"]["time_loss"] = float(r.time_loss)
+                    row["risk"]["loss_and_time"] = float(r.expected_loss + r.time_loss)
                 breach = breach_summary(r.components["collision"])
                 if breach is not None:
                     row["risk"]["breach"] = breach

@@ -43,6 +43,8 @@ class CombinedRisk:
     probability: float = 0.0
     probability_bounds: tuple[float, float] = (0.0, 0.0)
     expected_loss: float = 0.0
+    duration_s: float = 0.0  # the alternative's planned duration
+    time_loss: float = 0.0  # risk.loss_per_second x duration_s: what its time costs (ordering loss_and_time)
 
     def value(self, ordering: str) -> float:
         """The quantity the selector ranks by: the named ordering's (:mod:`executive.risk.orderings`)."""
@@ -57,11 +59,14 @@ class CombinedRisk:
             weighted_sum=self.weighted_sum,
             expected_loss=self.expected_loss,
         )
+        if self.time_loss:
+            out.update(time_loss=self.time_loss, loss_and_time=self.expected_loss + self.time_loss)
         return out
 
 
-def combine(reports: Sequence[RiskReport], config: RiskConfig) -> CombinedRisk:
-    """Combine one report per failure mode (modes must be distinct)."""
+def combine(reports: Sequence[RiskReport], config: RiskConfig, duration_s: float = 0.0) -> CombinedRisk:
+    """Combine one report per failure mode (modes must be distinct) of an alternative planned to
+    take ``duration_s`` (s; its time costs ``risk.loss_per_second`` per second)."""
     by_mode: dict[str, RiskReport] = {}
     for report in reports:
         if report.mode in by_mode:
@@ -71,4 +76,5 @@ def combine(reports: Sequence[RiskReport], config: RiskConfig) -> CombinedRisk:
     weighted = sum(weights.get(mode, 0.0) * r.seed_score for mode, r in by_mode.items())
     p, lower, upper = probability_of_any([r.probability for r in by_mode.values()])
     loss = sum(r.expected_loss for r in by_mode.values())
-    return CombinedRisk(by_mode, weighted, p, (lower, upper), loss)
+    time_loss = config.loss_per_second * duration_s
+    return CombinedRisk(by_mode, weighted, p, (lower, upper), loss, duration_s, time_loss)

@@ -22,6 +22,7 @@ from typing import NamedTuple
 import numpy as np
 
 from executive.risk.combine import CombinedRisk, combine
+from executive.risk.orderings import ordering as ordering_named
 from executive.schema.failure_modes import failure_mode, mode_names
 from executive.schema.types import RiskConfig
 
@@ -111,15 +112,16 @@ def fuse(
                 details=details,
             )
         )
-    return combine(reports, config)
+    return combine(reports, config, analytic.duration_s)
 
 
-def _values(post: Sequence[ModePosterior], ordering: str, draws: int, rng: np.random.Generator) -> np.ndarray:
-    """``draws`` samples of the ordering value from independent mode posteriors."""
+def _values(
+    post: Sequence[ModePosterior], ordering: str, draws: int, rng: np.random.Generator, offset: float
+) -> np.ndarray:
+    """``draws`` samples of the ordering value from independent mode posteriors (the ordering's
+    :attr:`~executive.risk.orderings.Ordering.sample`; ``offset``: the alternative's time loss)."""
     p = np.stack([rng.beta(max(m.a, 1e-12), max(m.b, 1e-12), draws) for m in post])
-    if ordering == "expected_loss":
-        return np.asarray(np.array([m.severity for m in post]) @ p)
-    return 1.0 - np.prod(1.0 - p, axis=0)  # probability of any failure (also for weighted_sum)
+    return np.asarray(ordering_named(ordering).sample(p, np.array([m.severity for m in post]), offset))
 
 
 class Choice(NamedTuple):
@@ -137,6 +139,7 @@ def choice_confidence(
     *,
     draws: int = 4000,
     seed: int = 0,
+    offsets: Mapping[str, float] | None = None,
 ) -> Choice:
     """The current choice under the posterior: its confidence and expected opportunity cost.
 
@@ -144,7 +147,7 @@ def choice_confidence(
     loss expected from choosing ``best`` instead of the alternative that is truly lowest. Both
     are estimated from ``draws`` joint posterior samples (seeded). The seed's weighted sum is
     no probability; with ``ordering == "weighted_sum"`` the rule judges the probability of any
-    failure instead.
+    failure instead. ``offsets``: per alternative, a known part of its value (its time loss).
 
     Raises:
         ValueError: no candidates.
@@ -153,7 +156,10 @@ def choice_confidence(
         raise ValueError("choice_confidence needs at least one alternative")
     rng = np.random.default_rng(seed)
     names = list(candidates)
-    samples = np.stack([_values(candidates[name], ordering, draws, rng) for name in names])
+    off = offsets or {}
+    samples = np.stack(
+        [_values(candidates[name], ordering, draws, rng, off.get(name, 0.0)) for name in names]
+    )
     best = int(np.argmin(samples.mean(axis=1)))
     shortfall = samples[best] - samples.min(axis=0)
     return Choice(names[best], float((shortfall <= indifference).mean()), float(shortfall.mean()))

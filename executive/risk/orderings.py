@@ -1,9 +1,10 @@
 """The orderings the selector ranks alternatives by: a registry of :class:`Ordering`.
 
 Built in: ``expected_loss`` (risk = probability x severity, the seed's equation 1),
-``probability`` (of any failure) and ``weighted_sum`` (the seed's weighted sum of the
-per-mode scores, Long et al. 2018). A scenario names one in ``risk.ordering``; a new
-one is a :func:`register_ordering` call::
+``probability`` (of any failure), ``weighted_sum`` (the seed's weighted sum of the
+per-mode scores, Long et al. 2018) and ``loss_and_time`` (the expected loss plus what the
+alternative's planned time costs at ``risk.loss_per_second``: the study's risk against payoff).
+A scenario names one in ``risk.ordering``; a new one is a :func:`register_ordering` call::
 
     register_ordering(Ordering("fall_first", lambda t: t.components["fall"].probability,
                                lambda risk, scene: (1.0, "a probability is at most 1")))
@@ -11,9 +12,13 @@ one is a :func:`register_ordering` call::
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Protocol
+
+import numpy as np
+from numpy.typing import NDArray
 
 from executive.errors import ExecutiveError
 from executive.schema.failure_modes import failure_modes
@@ -33,6 +38,8 @@ class Totals(Protocol):
     def probability(self) -> float: ...
     @property
     def expected_loss(self) -> float: ...
+    @property
+    def time_loss(self) -> float: ...
 
 
 @dataclass(frozen=True)
@@ -42,15 +49,28 @@ class Ordering:
     value: the quantity ranked by (lower is better) of an alternative's combined risk.
     max_value: the largest value it can take for a scenario's risk settings and scene, and
         how that is made up (a threshold at or above it would never ask for approval).
+    sample: the value from samples of the modes' probabilities ``p`` (modes x draws), their
+        severities and the alternative's time loss (the stopping rule's posterior draws); the
+        default is the probability of any failure.
+    key: the key of the value in a risk row (``CombinedRisk.as_dict``), label: its column heading.
     """
 
     name: str
     value: Callable[[Totals], float]
     max_value: Callable[[RiskConfig, SceneConfig | None], tuple[float, str]]
     description: str = ""
+    sample: Callable[[FloatArray, FloatArray, float], FloatArray] = lambda p, sev, t: _any(p)
+    key: str = ""
+    label: str = ""
 
 
+FloatArray = NDArray[np.float64]
 _ORDERINGS: dict[str, Ordering] = {}
+
+
+def _any(p: FloatArray) -> FloatArray:
+    """The probability of any failure per draw, the modes independent."""
+    return np.asarray(1.0 - np.prod(1.0 - p, axis=0))
 
 
 def register_ordering(o: Ordering) -> None:
@@ -118,16 +138,32 @@ def _max_expected_loss(risk: RiskConfig, scene: SceneConfig | None) -> tuple[flo
     return total, "severity " + " + ".join(parts)
 
 
+def _max_loss_and_time(risk: RiskConfig, scene: SceneConfig | None) -> tuple[float, str]:
+    top, how = _max_expected_loss(risk, scene)
+    if risk.loss_per_second > 0.0:
+        return math.inf, f"{how}, plus loss_per_second x the planned duration, which has no bound"
+    return top, how
+
+
 register_ordering(
     Ordering(
         "weighted_sum",
         lambda t: t.weighted_sum,
         _max_weighted_sum,
         "the seed's weighted sum of the per-mode scores",
+        key="weighted_sum",
+        label="seed sum",
     )
 )
 register_ordering(
-    Ordering("probability", lambda t: t.probability, _max_probability, "the probability of any failure")
+    Ordering(
+        "probability",
+        lambda t: t.probability,
+        _max_probability,
+        "the probability of any failure",
+        key="combined",
+        label="P(any)",
+    )
 )
 register_ordering(
     Ordering(
@@ -135,5 +171,19 @@ register_ordering(
         lambda t: t.expected_loss,
         _max_expected_loss,
         "the sum over modes of probability x severity",
+        lambda p, sev, t: np.asarray(sev @ p),
+        key="expected_loss",
+        label="exp. loss",
+    )
+)
+register_ordering(
+    Ordering(
+        "loss_and_time",
+        lambda t: t.expected_loss + t.time_loss,
+        _max_loss_and_time,
+        "the expected loss plus risk.loss_per_second x the planned duration",
+        lambda p, sev, t: np.asarray(sev @ p + t),
+        key="loss_and_time",
+        label="loss+time",
     )
 )

@@ -319,6 +319,7 @@ def _risk(node: Node, scene: SceneConfig | None = None) -> RiskConfig:
             "severity": ("severity", _severity),
             "ordering": ("ordering", lambda n: n.choice(ordering_names())),
             "threshold": ("threshold", Node.non_negative),  # its maximum: check_threshold
+            "loss_per_second": ("loss_per_second", between(0.0, R.SEVERITY_MAX)),
             "guard": ("guard", _guard),
             "rollouts": ("rollouts", _rollouts),
         },

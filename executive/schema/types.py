@@ -284,6 +284,9 @@ class RiskConfig:
     # executive.risk.orderings): a threshold no alternative can exceed would never ask for
     # approval, and is rejected.
     threshold: float = 0.3
+    # [0, 1000] loss per second of planned motion: the ordering loss_and_time ranks by the expected
+    # loss plus this times the alternative's planned duration (a slower way costs its time); 0: none
+    loss_per_second: float = 0.0
     guard: GuardConfig = field(default_factory=GuardConfig)
     rollouts: RolloutConfig = field(default_factory=RolloutConfig)
 
