@@ -39,7 +39,13 @@ import numpy as np
 from executive.decision.audit import atomic_write_text, read_resume_settings
 from executive.errors import ExecutiveError
 from executive.schema.types import Scenario
-from executive.validation.campaign import forecasts
+from executive.validation.campaign_scoring import (
+    executed_trials,
+    finite,
+    forecasts,
+    group_rates,
+    reliability_curves,
+)
 
 if TYPE_CHECKING:
     from executive.validation.variants import Variant
@@ -249,10 +255,6 @@ class _CampaignLog:
 # --- statistics ---------------------------------------------------------------------------------
 
 
-def _finite(x: float | None) -> float | None:
-    return x if x is not None and math.isfinite(x) else None
-
-
 def variant_statistics(
     variant: Variant,
     label: str,
@@ -309,7 +311,7 @@ def variant_statistics(
         "draws": variant.draws,
         "complete": bool(campaign.get("complete")),
         "alternatives": alternatives,
-        "spearman": _finite(rho),
+        "spearman": finite(rho),
         "regret": result.as_dict(),
         "regret_analytic": analytic.as_dict(),  # the same trials ranked by the analytic value alone
         "status": status,
@@ -350,7 +352,7 @@ def pooled_statistics(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, 
     """Per failure mode, over every trial executed in physics: events, ROC AUC, Brier, ECE."""
     from executive.validation.stats import brier, expected_calibration_error, roc_auc
 
-    executed = [r for r in records if r["outcome"] not in ("infeasible", "error")]
+    executed = executed_trials(records)
     groups = [(r.get("variant"), r["alternative"]) for r in executed]
     out = {}
     for mode, key, p, y in forecasts(executed):
@@ -358,22 +360,12 @@ def pooled_statistics(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, 
             "predicted_by": key,
             "trials": len(y),
             "events": int(y.sum()),
-            "auc": _finite(roc_auc(p, y)),
-            "auc_ceiling": _finite(roc_auc(_group_rates(groups, y), y)),
-            "brier": _finite(brier(p, y)),
-            "ece": _finite(expected_calibration_error(p, y)),
+            "auc": finite(roc_auc(p, y)),
+            "auc_ceiling": finite(roc_auc(group_rates(groups, y), y)),
+            "brier": finite(brier(p, y)),
+            "ece": finite(expected_calibration_error(p, y)),
         }
     return out
-
-
-def _group_rates(groups: Sequence[tuple[Any, str]], y: np.ndarray) -> np.ndarray:
-    """Each trial scored by its (variant, alternative)'s observed rate: the best ROC AUC any
-    prediction that is the same for every trial of an alternative in a variant can reach."""
-    sums: dict[tuple[Any, str], list[float]] = {}
-    for g, event in zip(groups, y, strict=True):
-        sums.setdefault(g, []).append(float(event))
-    rate = {g: float(np.mean(v)) for g, v in sums.items()}
-    return np.array([rate[g] for g in groups])
 
 
 def _regret_overall(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -434,9 +426,9 @@ def _write_outputs(folder: Path, summary: dict[str, Any], records: Sequence[dict
 
     write_summary(folder, to_json(summary))
     atomic_write_text(folder / "table.md", table_markdown(summary) + "\n")
-    executed = [r for r in records if r["outcome"] not in ("infeasible", "error")]
+    executed = executed_trials(records)
     if executed:
-        curves = [(f"{mode} by P({key})", p, y) for mode, key, p, y in forecasts(executed)]
+        curves = reliability_curves(executed)
         title = f"Reliability over {summary['variants_run']} variants of {summary['scenario']}"
         atomic_replace(folder / "reliability.png", lambda tmp: reliability_diagram(curves, tmp, title=title))
 

@@ -1,0 +1,165 @@
+"""A campaign's tables and figure: predicted risk beside observed failures.
+
+:func:`table_text` (what ``executive campaign`` prints) and :func:`table_markdown`
+(``table.md``) show, per alternative, each failure mode's predicted probability and each
+verdict's observed rate with the failures' 95% interval, then the scores per failure mode;
+their columns come from the failure-mode table. :func:`reliability_figure` draws
+``reliability.png``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from executive.schema.failure_modes import failure_mode, failure_modes, mode_names, mode_of_verdict, outcome
+from executive.validation.campaign_scoring import executed_trials, observed_outcomes, reliability_curves
+
+__all__ = ["reliability_figure", "table_markdown", "table_text"]
+
+
+def _breach_lines(summary: dict[str, Any]) -> list[str]:
+    """One line per executed alternative: breach touches of N, interval, predicted P(breach)."""
+    names = summary.get("breach_obstacles") or []
+    if not names:
+        return []
+    lines = [f"breach touches (category breach: {', '.join(names)}):"]
+    for a in summary["alternatives"]:
+        b = a.get("breach")
+        if b and b["trials"]:
+            lines.append(
+                f"  {a['name']}: {b['touches']} of {b['trials']}, 95% CI {_ci(b['rate'])}%, "
+                f"predicted P(breach) {b['predicted']:.4f}"
+            )
+    return lines
+
+
+def _pct(rate: dict[str, Any]) -> str:
+    value = rate["value"]
+    return "-" if value is None else f"{100 * value:.0f}%"
+
+
+def _ci(rate: dict[str, Any]) -> str:
+    low, high = rate["ci95"]
+    return f"[{100 * low:.0f}, {100 * high:.0f}]"
+
+
+def _num(x: float | None, fmt: str = ".3f") -> str:
+    return "-" if x is None else format(x, fmt)
+
+
+def _columns() -> tuple[tuple[str, str, int], ...]:
+    """The per-alternative columns both tables show: (text header, markdown header, text width),
+    from the failure-mode table: each mode's prediction, then each verdict's observed rate."""
+    modes, outcomes_ = failure_modes(), observed_outcomes()
+    return (
+        ("alternative", "alternative", -15),
+        ("trials", "trials", 7),
+        *((f"P({m.abbreviation})", f"P({m.name})", 9) for m in modes),
+        ("P(any)", "P(any)", 9),
+        ("exp.loss", "expected loss", 9),
+        *((_abbreviation(v), v, 6) for v in outcomes_),
+        ("any", "any failure", 6),
+        ("95% CI", "95% CI", 10),
+    )
+
+
+def _abbreviation(verdict: str) -> str:
+    """A verdict's short column header: its mode's (its own if it names the mode), or the outcome's."""
+    mode = mode_of_verdict(verdict)
+    if mode is None:
+        return outcome(verdict).abbreviation
+    return failure_mode(mode).abbreviation if verdict == mode else verdict[:4] + "."
+
+
+def _cells(a: dict[str, Any]) -> list[str]:
+    """One alternative's row of :func:`_columns` (an infeasible one: why, in the third cell)."""
+    if not a["trials"]:
+        return [a["name"], "0", f"infeasible: {a['error'][:80]}"]
+    p, f = a["predicted"], a["failure_rate_by_mode"]
+    predicted = [f"{p[k]:.4f}" for k in (*mode_names(), "combined", "expected_loss")]
+    observed = [_pct(f[m]) for m in observed_outcomes()]
+    return [
+        a["name"],
+        str(a["trials"]),
+        *predicted,
+        *observed,
+        _pct(a["failure_rate"]),
+        _ci(a["failure_rate"]),
+    ]
+
+
+def _text_row(cells: Sequence[str]) -> str:
+    return "".join(
+        f" {c:>{w}}" if w > 0 else f"{c:<{-w}}" for c, (_, _, w) in zip(cells, _columns(), strict=False)
+    )
+
+
+def table_text(summary: dict[str, Any]) -> str:
+    """Predicted risk and observed failures per alternative, then the scores per failure mode."""
+    lines = [
+        "predicted (on the estimate)  vs  observed (detectors, in physics)",
+        _text_row([c[0] for c in _columns()]),
+    ]
+    lines += [_text_row(_cells(a)) for a in summary["alternatives"]]
+    auc, b, e = summary["auc"], summary["brier"], summary["ece"]
+    lines.append(
+        "AUC    " + "  ".join(f"{m} {_num(auc[m])} ({summary['observed_failures'][m]} observed)" for m in auc)
+    )
+    ceiling = summary["auc_ceiling_per_alternative"]
+    lines.append(
+        "       best AUC of any prediction constant per alternative: "
+        + "  ".join(f"{m} {_num(ceiling[m])}" for m in ceiling)
+    )
+    lines.append("Brier  " + "  ".join(f"{m} {_num(b[m], '.4f')}" for m in b))
+    lines.append("ECE    " + "  ".join(f"{m} {_num(e[m], '.4f')}" for m in e))
+    lines.append(
+        f"Spearman (predicted {summary['ordering']} vs observed failure rate, per alternative): "
+        f"{_num(summary['spearman'], '.2f')}"
+    )
+    return "\n".join(lines + _breach_lines(summary))
+
+
+def table_markdown(summary: dict[str, Any]) -> str:
+    """:func:`table_text` as markdown tables (for a README or a report)."""
+    columns = _columns()
+    rows = [
+        "| " + " | ".join(c[1] for c in columns) + " |",
+        "|---|" + "---:|" * (len(columns) - 1),
+    ]
+    for a in summary["alternatives"]:
+        cells = _cells(a)
+        rows.append("| " + " | ".join(cells + [""] * (len(columns) - len(cells))) + " |")
+    auc, b, e = summary["auc"], summary["brier"], summary["ece"]
+    rows.append("")
+    ceiling = summary["auc_ceiling_per_alternative"]
+    rows.append(
+        "| failure mode | predicted by | observed | ROC AUC | best AUC if constant per alternative "
+        "| Brier | ECE |"
+    )
+    rows.append("|---|---|---:|---:|---:|---:|---:|")
+    for m in auc:
+        rows.append(
+            f"| {m} | P({summary['predictor'][m]}) | {summary['observed_failures'][m]} | {_num(auc[m])} "
+            f"| {_num(ceiling[m])} | {_num(b[m], '.4f')} | {_num(e[m], '.4f')} |"
+        )
+    rows.append("")
+    rows.append(
+        f"Spearman rank correlation, predicted {summary['ordering']} vs observed failure rate "
+        f"across alternatives: {_num(summary['spearman'], '.2f')}"
+    )
+    breach = _breach_lines(summary)
+    if breach:
+        rows += ["", breach[0], ""] + [f"- {line.strip()}" for line in breach[1:]]
+    return "\n".join(rows)
+
+
+def reliability_figure(records: Sequence[dict[str, Any]], path: Path) -> Path:
+    """The reliability diagram of the trials executed among ``records``, written (atomically)
+    to ``path``; returns ``path``."""
+    from executive.decision.audit import atomic_replace
+    from executive.validation.stats import reliability_diagram
+
+    curves = reliability_curves(executed_trials(records))
+    return atomic_replace(path, lambda tmp: reliability_diagram(curves, tmp))

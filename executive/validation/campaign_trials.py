@@ -1,0 +1,164 @@
+"""One trial of a campaign: an alternative's plan executed in physics on a sampled truth.
+
+Trial ``i`` of every alternative uses the seed :func:`trial_seed` and so the same truth
+(common random numbers). :func:`trial_scene` draws the trial's estimate and truth from that
+seed; :func:`run_trial` executes the plan on it and returns the record written to
+``trials.jsonl``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import asdict
+from typing import Any
+
+import numpy as np
+
+from executive.schema.types import Scenario, SceneVariation
+from executive.validation.campaign_predictions import Prediction, predict
+from executive.world.model import Perturbation
+
+__all__ = ["run_trial", "trial_scene", "trial_seed", "vary_scene"]
+
+
+def trial_seed(base_seed: int, index: int) -> int:
+    """The seed of trial ``index``: ``trials.seed + index`` (the same for every alternative)."""
+    return base_seed + index
+
+
+def vary_scene(
+    scenario: Scenario, variation: SceneVariation, rng: np.random.Generator
+) -> tuple[Scenario, dict[str, Any]]:
+    """A trial's scene: every object and obstacle of ``scenario`` shifted by a draw of ``variation``.
+
+    Draws in a fixed order (objects: dx, dy, dyaw; then obstacles: dx, dy; then, when
+    ``variation.perception_scale`` is a range, the trial's perception factor, log-uniform).
+    Returns the shifted scenario (the trial's estimate, its pose sigmas scaled by that
+    factor) and the shifts, for the record.
+    """
+    objects, obstacles = [], []
+    shifts: dict[str, Any] = {"object_offsets": {}, "obstacle_offsets": {}}
+    for body in scenario.scene.objects:
+        dx, dy = rng.normal(0.0, variation.object_position, 2) if variation.object_position else (0.0, 0.0)
+        dyaw = float(rng.normal(0.0, variation.object_yaw_rad)) if variation.object_yaw_rad else 0.0
+        x, y, z = body.position
+        roll, pitch, yaw = body.orientation_rad
+        objects.append(
+            dataclasses.replace(body, position=(x + dx, y + dy, z), orientation_rad=(roll, pitch, yaw + dyaw))
+        )
+        shifts["object_offsets"][body.name] = [float(dx), float(dy), dyaw]
+    for body in scenario.scene.obstacles:
+        dx, dy = (
+            rng.normal(0.0, variation.obstacle_position, 2) if variation.obstacle_position else (0.0, 0.0)
+        )
+        x, y, z = body.position
+        obstacles.append(dataclasses.replace(body, position=(x + dx, y + dy, z)))
+        shifts["obstacle_offsets"][body.name] = [float(dx), float(dy)]
+    scene = dataclasses.replace(scenario.scene, objects=tuple(objects), obstacles=tuple(obstacles))
+    uncertainty = scenario.uncertainty
+    if variation.varies_perception:
+        low, high = variation.perception_scale
+        factor = float(np.exp(rng.uniform(np.log(low), np.log(high))))
+        uncertainty = dataclasses.replace(
+            uncertainty,
+            object_position=uncertainty.object_position * factor,
+            object_yaw_rad=uncertainty.object_yaw_rad * factor,
+            obstacle_position=uncertainty.obstacle_position * factor,
+        )
+        shifts["perception_scale"] = factor
+    return dataclasses.replace(scenario, scene=scene, uncertainty=uncertainty), _perturbation_json(shifts)
+
+
+def trial_scene(scenario: Scenario, seed: int) -> tuple[Scenario, Perturbation, dict[str, Any] | None]:
+    """Trial ``seed``'s estimate (the scenario, or a varied scene), its truth, and the variation.
+
+    One generator per trial: first the scene variation (when the scenario has one), then the
+    truth's perturbation from the estimate's uncertainty (:func:`executive.world.model.sample_perturbation`).
+    """
+    from executive.world.model import sample_perturbation
+
+    rng = np.random.default_rng(seed)
+    variation = scenario.trials.scene_variation
+    if variation.is_zero():
+        return scenario, sample_perturbation(scenario, rng), None
+    estimate, shifts = vary_scene(scenario, variation, rng)
+    return estimate, sample_perturbation(estimate, rng), shifts
+
+
+def run_trial(
+    scenario: Scenario,
+    task_index: int,
+    alternative: str,
+    index: int,
+    seed: int,
+    prediction: Prediction | None = None,
+) -> dict[str, Any]:
+    """Execute one trial; the record written to ``trials.jsonl`` (JSON-safe, no timings).
+
+    The trial takes the alternative's plan and predicted risk on the *estimate*, builds the
+    truth world of its perturbation (object and obstacle poses, object mass, friction, the
+    robot's CoM offset) and executes the plan in physics with the alternative forced (no
+    selection, no approval, no live guards: the question is what the plan does, not whether a
+    guard would stop it). Outcome: ``success``, or the detectors' failure mode ``collision``,
+    ``fall``, ``drop``, ``unstable``, or a verdict no mode predicts (``tracking``, ``task``,
+    ``timeout``: not finished in the time limit; :mod:`executive.schema.failure_modes`);
+    ``infeasible`` when the alternative does not plan (nothing is executed) and ``error`` when
+    the trial's code raised (a defect; counted, never hidden).
+
+    ``prediction``: the alternative planned on the scenario's fixed estimate, once per
+    alternative (planning is deterministic: planning again per trial gives the same plan);
+    None: plan it here, on the trial's own scene, as a scenario with a scene variation needs.
+    """
+    from executive.execution.runner import error_fields, execute_plan, outcome_fields
+    from executive.world.model import build
+
+    estimate, perturbation, shifts = trial_scene(scenario, seed)
+    if prediction is None or shifts is not None:
+        prediction = predict(estimate, task_index, alternative)
+    record: dict[str, Any] = {
+        "trial": index,
+        "alternative": alternative,
+        "seed": seed,
+        "outcome": "infeasible",
+        "failure": None,
+        "placement_error_m": None,
+        "sim_time_s": 0.0,
+        "predicted": _predicted(prediction),
+        "scene": shifts,
+        "truth": _perturbation_json(asdict(perturbation)),
+    }
+    if not prediction.feasible:
+        record["failure"] = {"mode": "infeasible", "detail": prediction.error}
+        return record
+    try:
+        truth = build(estimate, perturbation, kind="truth")
+        result = execute_plan(prediction.plan, truth, estimate.mission[task_index])
+    except Exception as exc:  # a defect in a trial must not end the campaign; it is counted
+        record.update(error_fields(exc))
+        return record
+    record.update(outcome_fields(result))
+    return record
+
+
+def _predicted(prediction: Prediction) -> dict[str, Any] | None:
+    """A record's prediction: per-mode probabilities and the value ranked by; with rollouts,
+    the analytic prediction they were fused with under ``analytic``."""
+    if prediction.risk is None:
+        return None
+    out: dict[str, Any] = {**prediction.risk, "value": prediction.value}
+    if prediction.analytic is not None:
+        out["analytic"] = prediction.analytic
+    return out
+
+
+def _perturbation_json(p: dict[str, Any]) -> dict[str, Any]:
+    def r(v: Any) -> Any:
+        if isinstance(v, dict):
+            return {k: r(x) for k, x in v.items()}
+        if isinstance(v, list | tuple):
+            return [r(x) for x in v]
+        if isinstance(v, float):
+            return round(v, 9)
+        return v
+
+    return r(p)
