@@ -1,116 +1,55 @@
-"""RiskSelector: a py_trees composite that runs the lowest-risk alternative of a task.
+"""RiskSelector: a py_trees composite that plans, ranks, gates and runs the alternatives of one task.
 
-On entry the selector plans and assesses every alternative of its task on the
-current estimate (:func:`executive.decision.assessment.assess_task`) in a planning worker
-process (:mod:`executive.decision.planning_worker`), so ticks keep returning RUNNING (the
-robot holds) while it plans, and keep their period. It then:
+On entry it plans every alternative of its task on the current estimate, in a planning worker
+process (ticks return RUNNING, the robot holds) or in the tick (``background=False``), and takes
+the result in a piece a tick. It runs the lowest-risk feasible alternative (``risk.ordering``);
+if even that is above ``risk.threshold`` it asks the approval channel first. A failed alternative
+makes it look through the robot and re-plan the ones left; a terminal failure ends the task.
+Every step is an audit log line before it is acted on.
 
-1. ranks the feasible alternatives by the scenario's ordering quantity
-   (``risk.ordering``: ``weighted_sum``, ``probability`` or ``expected_loss``) and
-   makes their subtrees its children, lowest first;
-2. if the lowest value is above ``risk.threshold``, escalates: an
-   :class:`executive.decision.approval.ApprovalRequest` goes to the approval channel, and the
-   selector waits (RUNNING, holding) for the decision: approve (the recommended or
-   another alternative), re-plan, or abort (also what a timeout gives);
-3. ticks the chosen child. If it fails, the selector re-plans from the current
-   state (the robot's measured joints, the objects where the robot now observes
-   them) without the alternatives already tried, and goes on with the next.
-   A terminal failure (a fall or an unstable simulation: the failure-mode table's
-   ``terminal``) ends the task at once: nothing is re-tried on a
-   robot that may not be standing.
-
-The estimate follows the objects (:mod:`executive.world.observation`): the selector looks
-through the robot and updates the estimate after every failure (``after_failure``; a re-plan
-that follows at once starts from that look), before a re-plan an operator asked for
-(``before_replan``) and when its task ends after acting (``after_task``, unless it has just
-looked), each time with an ``observation`` line in the log.
-
-The worker process does all the heavy work of a decision
-(:class:`executive.decision.planning_job.Planning`): it plans and assesses, dry-runs and
-rolls out in physics, and computes the planned distances of the lowest-risk alternative's
-guarded motions. What comes back is plain data (plans as arrays); the ticks that follow
-take it in a piece a tick (:meth:`RiskSelector._swap_pieces`: its log lines, one subtree,
-one guarded motion's prepared distances for the live risk monitor ``/executive/live_risk``),
-then rank, select and swap the subtrees in; the chosen one is ticked from the next tick on.
-A worker that dies or hangs is logged (``planning_worker``) and replaced, and the task
-re-plans from where the robot holds. ``background=False`` does the same work inside the
-tick instead (blocking: for batch use and tests).
-
-Every step is a line in the audit log (:class:`executive.decision.audit.AuditLog`) before
-it is acted on; no alternative above the threshold starts without an approval
-line naming it (checked in :meth:`RiskSelector._start`).
+Its parts: :mod:`~executive.decision.selector_planning` (the job's round trip),
+:mod:`~executive.decision.selector_swap` (the result taken in), :mod:`~executive.decision.selector_gate`
+(approval), :mod:`~executive.decision.selector_failure` (an ended alternative),
+:mod:`~executive.decision.selector_rows` (log rows). How it works: ``docs/selector.md``.
 """
 
 from __future__ import annotations
 
-import functools
-import math
 import time
 from collections.abc import Callable, Iterator, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
-import mujoco
 import numpy as np
 import py_trees
 
-from behaviours.guard import LIVE_RISK_KEY, RiskGuard
+from behaviours.guard import LIVE_RISK_KEY
 from behaviours.robot_access import NAMESPACE
-from executive.decision.approval import AlternativeRisk as RequestRow
-from executive.decision.approval import ApprovalChannel, ApprovalDecision, ApprovalRequest, PendingApproval
+from executive.decision.approval import ApprovalChannel, ApprovalDecision, PendingApproval
 from executive.decision.assessment import AlternativeRisk
 from executive.decision.audit import AuditLog
-from executive.decision.physics_check import PhysicsCheck, PhysicsVerdict, physics_text
-from executive.decision.planning_job import (
-    EstimateState,
-    Planning,
-    PlanningJob,
-    PlanningResult,
-    PreparedKnots,
-    ranked,
-)
+from executive.decision.physics_check import PhysicsCheck
+from executive.decision.planning_job import EstimateState, PlanningJob, ranked
 from executive.decision.planning_worker import PlanningWorker, WorkerLost
+from executive.decision.selector_failure import check_placed, closest_call, failure_of, is_terminal
+from executive.decision.selector_gate import ApprovalGate
+from executive.decision.selector_planning import (
+    MAX_WORKER_LOSSES,
+    PlanningLink,
+    object_state,
+    refresh_estimate,
+)
+from executive.decision.selector_rows import ranking_rows, risk_row, task_label
+from executive.decision.selector_swap import ResultSwap, swap_children
 from executive.errors import ExecutiveError
-from executive.execution.runner import behaviour_failure
-from executive.risk.collision import breach_summary
-from executive.schema.failure_modes import failure_mode, mode_of_verdict
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
 from executive.world.model import World
 from executive.world.observation import refresh
 
-if TYPE_CHECKING:
-    from executive.planning.plan import AlternativePlan
-
-__all__ = ["RiskSelector", "task_label"]
+__all__ = ["MAX_WORKER_LOSSES", "RiskSelector", "risk_row", "task_label"]
 
 Status = py_trees.common.Status
 FloatArray = np.ndarray
-
-#: Planning workers lost in one decision before the task fails (each is replaced and re-planned).
-MAX_WORKER_LOSSES = 3
-
-
-def task_label(task: Task) -> str:
-    """One line naming the task (its kind's label)."""
-    return task.label()
-
-
-def risk_row(alt: AlternativeRisk, ordering: str) -> dict[str, Any]:
-    """One alternative's line for the log and the approval request."""
-    row: dict[str, Any] = {"name": alt.name, "feasible": alt.feasible}
-    if alt.physics is not None:
-        row["physics"] = alt.physics
-    if alt.risk is None:
-        row["reason"] = alt.error
-        return row
-    row["risk"] = alt.risk.as_dict()
-    breach = breach_summary(alt.risk.components["collision"]) if "collision" in alt.risk.components else None
-    if breach is not None:  # touching a breach obstacle (category breach), apart from any collision
-        row["breach"] = breach
-    row["value"] = alt.risk.value(ordering)
-    row["planned_duration_s"] = alt.plan.duration if alt.plan is not None else None
-    row["plan_s"], row["assess_s"] = alt.plan_s, alt.assess_s
-    return row
 
 
 class RiskSelector(py_trees.composites.Composite):
@@ -121,11 +60,6 @@ class RiskSelector(py_trees.composites.Composite):
         estimate: the estimate world (planning and risk see only this).
         channel: where approval requests go.
         log: the audit log.
-
-    The robot comes from the blackboard (``/executive/robot``, see
-    :mod:`behaviours.robot_access`): its measured ``data.qpos`` (same layout as the
-    estimate's model) is where re-planning starts, and its ``observe_objects()`` (if it
-    has one) where the objects are.
         timeout_s: approval timeout (None: wait forever).
         guard: wrap motions in live risk guards.
         physics: the physics check (dry runs, rollouts) every decision goes through; None
@@ -135,6 +69,12 @@ class RiskSelector(py_trees.composites.Composite):
             inside the tick (blocking, for batch use).
         worker: the planning worker to use (shared by a mission's selectors); None with
             ``background``: the selector starts one of its own on its first decision.
+        clock: the clock of approval deadlines.
+
+    The robot comes from the blackboard (``/executive/robot``, see
+    :mod:`behaviours.robot_access`): its measured ``data.qpos`` (same layout as the
+    estimate's model) is where re-planning starts, and its ``observe_objects()`` (if it
+    has one) where the objects are.
     """
 
     def __init__(
@@ -175,23 +115,28 @@ class RiskSelector(py_trees.composites.Composite):
         self.ranking: list[AlternativeRisk] = []  # feasible, lowest value first
         self.results: list[AlternativeRisk] = []  # every alternative of the last planning
         self.tried: list[str] = []
-        self.worker = worker
-        self._own_worker = False  # whether this selector started (and closes) its worker
-        self._local: Planning | None = None  # the in-tick work (background False)
-        self._job: PlanningJob | None = None  # the decision being worked out
-        self._ticket: int | None = None  # its ticket with the worker
-        self._lost: WorkerLost | None = None  # the worker was found gone when the job was sent
-        self._losses = 0  # workers lost in this decision
-        self._result: PlanningResult | None = None  # its result, once received
-        self._built: dict[str, py_trees.behaviour.Behaviour] = {}  # subtrees built from it so far
-        self._swap: list[Callable[[], None]] | None = None  # what is left of taking the result in
-        self._approved: set[str] = set()
+        self._link = PlanningLink(name, estimate, physics, background=background, worker=worker)
+        self._swap = ResultSwap(name, self.kind, guard=guard, log=log)
+        self._gate = ApprovalGate(
+            name,
+            channel=channel,
+            log=log,
+            ordering=self.ordering,
+            threshold=self.threshold,
+            timeout_s=timeout_s,
+            clock=clock,
+        )
         self._by_name: dict[str, py_trees.behaviour.Behaviour] = {}
         self._last_look: float | None = None  # robot time of the last observation
         self.bb = self.attach_blackboard_client(name=name, namespace=NAMESPACE)
         self.bb.register_key("robot", access=py_trees.common.Access.READ)
         self.bb.register_key("holding", access=py_trees.common.Access.WRITE)
         self.bb.register_key(LIVE_RISK_KEY, access=py_trees.common.Access.READ)
+
+    @property
+    def worker(self) -> PlanningWorker | None:
+        """The planning worker the selector uses (None: none yet, or planning in the tick)."""
+        return self._link.worker
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -217,9 +162,7 @@ class RiskSelector(py_trees.composites.Composite):
         import behaviours.handover
         import behaviours.push  # noqa: F401
 
-        if not self.background and self._local is None:
-            self._local = Planning(self.estimate, self.physics)
-            self._local.tools(self.name)
+        self._link.setup()
 
     def tick(self) -> Iterator[py_trees.behaviour.Behaviour]:
         if self.status != Status.RUNNING:
@@ -245,24 +188,21 @@ class RiskSelector(py_trees.composites.Composite):
             # halted from above (the run is stopped): answer nothing more, plan nothing more
             if self.pending is not None and self.pending.decision is None:
                 self.pending.cancel(by="halt")
-            if self._ticket is not None and self.worker is not None:
-                self.worker.forget(self._ticket)
-                self._ticket = None
+            self._link.forget()
         super().stop(new_status)
 
     def shutdown(self) -> None:
-        if self._own_worker and self.worker is not None:
-            self.worker.close()
-            self.worker, self._own_worker = None, False
+        self._link.close()
 
     # --- states ---------------------------------------------------------------------------
 
     def _reset(self) -> None:
         self.phase, self.outcome, self.failure = "idle", None, None
         self.chosen, self.chosen_risk, self.approval, self.pending = None, None, None, None
-        self.ranking, self.results, self.tried, self._approved = [], [], [], set()
-        self._job, self._ticket, self._lost, self._result, self._built = None, None, None, None, {}
-        self._losses = 0
+        self.ranking, self.results, self.tried = [], [], []
+        self._link.reset()
+        self._swap.reset()
+        self._gate.reset()
 
     def _start_planning(self, observe: str | None = None) -> None:
         """Plan from the measured joints; ``observe``: first update the estimate, for this reason."""
@@ -271,7 +211,7 @@ class RiskSelector(py_trees.composites.Composite):
             self._observe(observe)
         q, observed = self.measured_state()
         q = np.array(q, dtype=float)
-        self._refresh_estimate(q, observed)
+        refresh_estimate(self.estimate, q, observed)
         remaining = tuple(a for a in self.names if a not in self.tried)
         task = self.task.restricted(remaining)
         self.log.record(
@@ -279,46 +219,24 @@ class RiskSelector(py_trees.composites.Composite):
             task=self.name,
             alternatives=list(remaining),
             replan=bool(self.tried),
-            object=self._object_state(),
+            object=object_state(self.estimate, self.task),
         )
         self.phase = "planning"
-        self._job = PlanningJob(
+        monitor = self._monitor()
+        job = PlanningJob(
             self.name,
             task,
             q,
             EstimateState.of(self.estimate),
             physics=self.physics is not None,
-            guard=self._monitor() is not None,
+            guard=monitor is not None,
         )
-        self._submit()
+        self._swap.reset()
+        self._link.submit(job, monitor)
 
     def _monitor(self) -> Any:
         """The live risk monitor the guards use (None: guards off, or none installed)."""
         return self.bb.get(LIVE_RISK_KEY) if self.guard and self.bb.exists(LIVE_RISK_KEY) else None
-
-    def _submit(self) -> None:
-        """Hand the decision's job to the worker, or (``background`` False) work it out now."""
-        assert self._job is not None
-        self._ticket, self._lost, self._result, self._built, self._swap = None, None, None, {}, None
-        if not self.background:
-            self.setup()
-            assert self._local is not None
-            self._local.monitor = self._monitor()
-            self._result = self._local.run(self._job)
-            return
-        if self.worker is None:  # a selector on its own: its own worker
-            jobs = self.physics.pool.jobs if self.physics is not None else 0
-            self.worker, self._own_worker = PlanningWorker(self.estimate.scenario, jobs), True
-        try:
-            self._ticket = self.worker.submit(self._job)
-        except WorkerLost as lost:  # gone while idle: the next poll replaces it
-            self._lost = lost
-
-    def _object_state(self) -> dict[str, Any] | None:
-        if not self.task.object:  # a task that moves no object (a press)
-            return None
-        pos, quat = self.estimate.object_pose(self.task.object)
-        return {"name": self.task.object, "position": pos, "quat": quat}
 
     def _observe(self, reason: str) -> None:
         """Update the estimate from one look through the robot and log it (``observation``).
@@ -330,17 +248,6 @@ class RiskSelector(py_trees.composites.Composite):
         self.bb.holding = dict(fields["holding"])
         self._last_look = robot.time
         self.log.record("observation", task=self.name, **fields)
-
-    def _refresh_estimate(self, q: FloatArray, observed: dict[str, tuple[FloatArray, FloatArray]]) -> None:
-        """Objects the robot observes are put where it sees them; the others stay estimated."""
-        world = self.estimate
-        for name, adr in world.ids.object_qpos.items():
-            if name in observed:
-                pos, quat = observed[name]
-                world.data.qpos[adr : adr + 3] = pos
-                world.data.qpos[adr + 3 : adr + 7] = quat
-            q[adr : adr + 7] = world.data.qpos[adr : adr + 7]
-        mujoco.mj_kinematics(world.model, world.data)
 
     def _step(self) -> Status | None:
         """Advance the planning/approval state machine; None means: tick the chosen child."""
@@ -358,125 +265,63 @@ class RiskSelector(py_trees.composites.Composite):
         raise ExecutiveError(f"{self.name}: tick in phase '{self.phase}'")
 
     def _planning_step(self) -> Status | None:
-        """Wait for the decision's result; then take it in a piece a tick (:meth:`_swap_pieces`),
+        """Wait for the decision's result; then take it in a piece a tick (:class:`ResultSwap`),
         decide, and tick the chosen subtree from the next tick on (all in one tick when planning
         in the tick)."""
         spread = self.background  # from a worker: keep every tick short
-        if self._result is None:
+        link, swap = self._link, self._swap
+        result = link.result
+        if result is None:
             try:
-                self._result = self._receive()
+                result = link.receive()
             except WorkerLost as lost:
                 return self._on_worker_lost(lost)
-            if self._result is None:
+            if result is None:
                 self.feedback_message = f"planning {self.name}"
                 return Status.RUNNING
-            self._losses = 0
-        if self._swap is None:
-            failure = self._result.failure
+        if swap.pieces is None:
+            failure = result.failure
             if failure is not None:
                 return self._finish("failed", {"mode": "planning", "detail": failure.detail()})
-            self._swap = self._swap_pieces(self._result)
+            swap.begin(result, self.ordering, self._monitor())
             if spread:
                 return Status.RUNNING
-        while self._swap:
-            self._swap.pop(0)()
+        while swap.pieces:
+            note = swap.step()
+            if note is not None:
+                self.feedback_message = note
             if spread:
                 return Status.RUNNING
-        decided = self._decide(self._result.results, self._built)
+        decided = self._decide(result.results, swap.built)
         if decided is None and spread:  # the chosen subtree's first tick (its motion's set-up) is the next
             return Status.RUNNING
         return decided
 
-    def _swap_pieces(self, result: PlanningResult) -> list[Callable[[], None]]:
-        """Taking ``result`` in, in pieces of at most about a millisecond: its physics lines, each
-        feasible alternative's subtree, and per guarded motion of the lowest-risk one its prepared
-        knot distances and its collision pairs (what the guard's first check would build)."""
-        feasible = ranked(result.results, self.ordering)
-        pieces: list[Callable[[], None]] = [lambda: self._log_physics(result.results, result.verdict)]
-        pieces += [functools.partial(self._build, alt) for alt in feasible]
-        monitor = self._monitor()
-        best = feasible[0].plan if feasible else None
-        if monitor is not None and best is not None:
-            pieces += [functools.partial(self._adopt, monitor, best, knots) for knots in result.knots]
-            pieces.append(functools.partial(self._prime_guards, monitor, feasible[0].name))
-        return pieces
-
-    def _prime_guards(self, monitor: Any, name: str) -> None:
-        """Have the guards of ``name``'s subtree work out their allowed contacts now (each motion's
-        first tick would)."""
-        for node in self._built[name].iterate():
-            if isinstance(node, RiskGuard):
-                node.allow(monitor)
-
-    def _build(self, alt: AlternativeRisk) -> None:
-        """Build ``alt``'s subtree (kept for the decision)."""
-        assert alt.plan is not None
-        subtree = self.kind.subtree(alt.plan, guard=self.guard)
-        subtree.setup_with_descendants()
-        self._built[alt.name] = subtree
-        self.feedback_message = f"planning {self.name}: {alt.name} ready"
-
-    def _receive(self) -> PlanningResult | None:
-        """The worker's result if it has come (None: not yet); raises WorkerLost."""
-        if self._lost is not None:
-            raise self._lost
-        assert self.worker is not None and self._ticket is not None
-        result = self.worker.poll(self._ticket)
-        if result is not None:
-            self._ticket = None
-        return result
-
     def _on_worker_lost(self, lost: WorkerLost) -> Status:
         """Log the lost worker, start a fresh one and re-plan from where the robot holds."""
-        assert self.worker is not None
-        self._losses += 1
-        fields = {"event": "lost", "reason": lost.reason, "pid": lost.pid, "losses": self._losses}
-        if self._losses > MAX_WORKER_LOSSES:
+        losses = self._link.count_loss()
+        fields = {"event": "lost", "reason": lost.reason, "pid": lost.pid, "losses": losses}
+        if losses > MAX_WORKER_LOSSES:
             self.log.record("planning_worker", task=self.name, **fields, action="fail the task")
-            detail = f"the planning worker was lost {self._losses} times in a decision; last it {lost.reason}"
+            detail = f"the planning worker was lost {losses} times in a decision; last it {lost.reason}"
             return self._finish("failed", {"mode": "planning", "detail": detail})
-        replacement = self.worker.replace()
+        replacement = self._link.replace()
         self.log.record(
             "planning_worker", task=self.name, **fields, action="replaced", replacement=replacement
         )
         self._start_planning()  # the robot held meanwhile: re-plan from where it is
         return Status.RUNNING
 
-    def _adopt(self, monitor: Any, plan: AlternativePlan, knots: PreparedKnots) -> None:
-        """Hand the worker's prepared knot distances of one guarded motion of ``plan`` to ``monitor``."""
-        trajectory = plan.trajectories.get(knots.step)
-        if trajectory is not None:
-            monitor.adopt(
-                trajectory.qpos,
-                carried=knots.carried,
-                allow=knots.allow,
-                distances=knots.distances,
-                names=knots.names,
-            )
-
-    def _log_physics(self, results: Sequence[AlternativeRisk], verdict: PhysicsVerdict | None) -> None:
-        """One ``dry_run`` line per alternative run in physics, and a ``rollouts`` line if any ran."""
-        if verdict is None:
-            return
-        for alt in results:
-            if alt.physics is not None:
-                dry = alt.physics["dry_run"]
-                self.log.record(
-                    "dry_run", task=self.name, name=alt.name, ok=alt.feasible, reason=alt.error, **dry
-                )
-        if verdict.stopped != "off":
-            per_alt = {a.name: a.physics for a in results if a.physics is not None and a.feasible}
-            self.log.record("rollouts", task=self.name, **verdict.as_dict(), alternatives=per_alt)
-
     def _decide(
         self, results: Sequence[AlternativeRisk], subtrees: dict[str, py_trees.behaviour.Behaviour]
     ) -> Status | None:
+        """Log the plans, rank them and make them the children; start the lowest, or escalate."""
         for alt in results:
             self.log.record("plan", task=self.name, **risk_row(alt, self.ordering))
         feasible = ranked(results, self.ordering)
         self.ranking = feasible
         self.results = list(results)
-        self._swap_children(feasible, subtrees)
+        self._by_name = swap_children(self, feasible, subtrees)
         if not feasible:
             reasons = "; ".join(f"{a.name}: {a.error}" for a in results) or "no alternatives left"
             self.log.record(
@@ -488,9 +333,7 @@ class RiskSelector(py_trees.composites.Composite):
         best = feasible[0]
         assert best.risk is not None
         value = best.risk.value(self.ordering)
-        ranking = [
-            {"name": a.name, "value": a.risk.value(self.ordering) if a.risk else None} for a in feasible
-        ]
+        ranking = ranking_rows(feasible, self.ordering)
         if value <= self.threshold:
             self.log.record(
                 "selection",
@@ -503,42 +346,17 @@ class RiskSelector(py_trees.composites.Composite):
                 reason=f"lowest {self.ordering} {value:.4g} is within the threshold {self.threshold:g}",
             )
             return self._start(best.name)
-        reason = f"lowest {self.ordering} {value:.4g} ({best.name}) is above the threshold {self.threshold:g}"
-        request = ApprovalRequest(
-            task=f"{self.name}: {task_label(self.task)}",
-            alternatives=tuple(
-                RequestRow(
-                    name=a.name,
-                    feasible=a.risk is not None,
-                    risk=a.risk.as_dict() if a.risk is not None else {},
-                    value=a.risk.value(self.ordering) if a.risk is not None else None,
-                    reason=a.error,
-                    physics=physics_text(a.physics) if a.physics is not None and a.feasible else "",
-                )
-                for a in [*feasible, *(r for r in results if r.risk is None)]
-            ),
-            recommended=best.name,
-            threshold=self.threshold,
-            ordering=self.ordering,
-            reason=reason,
-        )
-        self.log.record(
-            "selection", task=self.name, chosen=None, ranking=ranking, reason=reason + ": escalated"
-        )
-        self.log.record(
-            "approval_request", task=self.name, request=request.as_dict(), channel=self.channel.name
-        )
-        self.pending = PendingApproval(request, self.timeout_s, clock=self.clock)
+        label = f"{self.name}: {task_label(self.task)}"
+        self.pending = self._gate.escalate(label, feasible, results, ranking)
         self.phase = "awaiting_approval"
         self.channel.submit(self.pending)
-        self.feedback_message = f"waiting for approval: {reason}"
+        self.feedback_message = f"waiting for approval: {self.pending.request.reason}"
         return Status.RUNNING
 
     def _on_decision(self, decision: ApprovalDecision) -> Status | None:
         self.approval = decision
-        self.log.record("approval", task=self.name, **decision.as_dict())
+        self._gate.answered(decision)
         if decision.decision == "approve" and decision.alternative is not None:
-            self._approved.add(decision.alternative)
             return self._start(decision.alternative)
         if decision.decision == "replan":
             self._start_planning(observe="before_replan")
@@ -547,32 +365,16 @@ class RiskSelector(py_trees.composites.Composite):
             return self._finish("aborted", {"mode": "denied", "detail": f"denied by {decision.by}"})
         return self._finish("aborted", {"mode": "aborted", "detail": f"aborted by {decision.by}"})
 
-    def _swap_children(
-        self, ranked: Sequence[AlternativeRisk], subtrees: dict[str, py_trees.behaviour.Behaviour]
-    ) -> None:
-        """Make the built subtrees the children, lowest risk first."""
-        for child in list(self.children):
-            self.remove_child(child)
-        self._by_name = {}
-        for alt in ranked:
-            subtree = subtrees[alt.name]
-            self.add_child(subtree)
-            self._by_name[alt.name] = subtree
-
     def _start(self, name: str) -> Status | None:
         alt = next(a for a in self.ranking if a.name == name)
         assert alt.risk is not None
         value = alt.risk.value(self.ordering)
-        if value > self.threshold and name not in self._approved:
-            # The invariant of the risk gate; reaching this is a bug, never an operator's choice.
-            raise ExecutiveError(
-                f"{name} ({self.ordering} {value:.4g}) is above the threshold without approval"
-            )
+        self._gate.check(name, value)  # the risk gate's invariant: raises ExecutiveError
         self.chosen, self.chosen_risk = name, risk_row(alt, self.ordering)
         self.current_child = self._by_name[name]
         self.tried.append(name)
         self.log.record(
-            "execute", task=self.name, alternative=name, value=value, approved=name in self._approved
+            "execute", task=self.name, alternative=name, value=value, approved=name in self._gate.approved
         )
         self.phase = "executing"
         self.feedback_message = f"executing {name}"
@@ -585,17 +387,16 @@ class RiskSelector(py_trees.composites.Composite):
             self.feedback_message = f"{child.name}: {tip.feedback_message if tip else ''}"
             return Status.RUNNING
         if status == Status.SUCCESS:
-            placed = self._check_placed()
+            placed = check_placed(self.kind, self.task, self.estimate, self.bb.robot, self.log, self.name)
             if placed is not None:
                 self.log.record("failure", task=self.name, alternative=child.name, **placed)
                 self._observe("after_failure")
                 return self._finish("failed", placed)
             return self._finish("success", None)
-        failure = self._failure_of(child)
+        failure = failure_of(child, self.bb.robot)
         self.log.record("failure", task=self.name, alternative=child.name, **failure)
         self._observe("after_failure")  # the re-plan below starts from this look
-        mode = mode_of_verdict(failure["mode"])
-        if mode is not None and failure_mode(mode).terminal:
+        if is_terminal(failure):
             return self._finish("failed", failure)
         left = [a for a in self.names if a not in self.tried]
         if not left:
@@ -605,36 +406,6 @@ class RiskSelector(py_trees.composites.Composite):
         self.bb.robot.detector.acknowledge()
         self._start_planning()
         return Status.RUNNING
-
-    def _check_placed(self) -> dict[str, Any] | None:
-        """The task kind's check of what the subtree did (None: done as asked, or nothing to ask)."""
-        detector = getattr(self.bb.robot, "detector", None)
-        if detector is None:
-            return None
-        verdict = self.kind.verify(self.task, self.estimate, detector)
-        if verdict is None:
-            return None
-        if verdict.ok:
-            self.log.record(verdict.event, task=self.name, **verdict.fields)
-            return None
-        return verdict.fields
-
-    def _failure_of(self, child: py_trees.behaviour.Behaviour) -> dict[str, Any]:
-        """The detectors' verdict if they flagged one, else the failed behaviour's own message."""
-        tip = child.tip()
-        message = tip.feedback_message if tip is not None else ""
-        found = self.bb.robot.failure
-        if found is not None:
-            return {
-                "mode": found.mode,
-                "detail": found.detail,
-                "behaviour": tip.name if tip else "",
-                "time": found.time,
-                "bodies": list(found.bodies),
-                "force": found.force,
-            }
-        mode = behaviour_failure(tip, 0.0).mode
-        return {"mode": mode, "detail": message, "behaviour": tip.name if tip else ""}
 
     def _finish(self, outcome: str, failure: dict[str, Any] | None) -> Status:
         self.outcome = outcome
@@ -648,21 +419,6 @@ class RiskSelector(py_trees.composites.Composite):
             outcome=outcome,
             chosen=self.chosen,
             failure=self.failure,
-            closest_call=self._closest_call(),
+            closest_call=closest_call(self.bb.robot),
         )
         return Status.SUCCESS if outcome == "success" else Status.FAILURE
-
-    def _closest_call(self) -> dict[str, Any] | None:
-        """The detectors' near-miss record of the run so far (None: no detector keeps one)."""
-        call = getattr(getattr(self.bb.robot, "detector", None), "closest_call", None)
-        if call is None:
-            return None
-        return {
-            "distance": call.distance if math.isfinite(call.distance) else None,  # m; None: beyond horizon
-            "bodies": list(call.distance_bodies),
-            "time": call.distance_time,
-            "ignored_force": call.ignored_force,
-            "ignored_bodies": list(call.ignored_bodies),
-            "self_contacts": call.self_contacts,
-            "summary": call.describe(),
-        }

@@ -16,7 +16,7 @@ waiting for an answer, if any), ``log`` (the :class:`executive.decision.audit.Au
 
 A host that ticks in real time should call :func:`freeze_startup_heap` once it has built
 the executive (``executive run`` does): CPython's full garbage collection otherwise
-stops every thread for 27-57 ms now and then, in the middle of a motion.
+stops every thread now and then, in the middle of a motion (measured: ``docs/workers.md``).
 """
 
 from __future__ import annotations
@@ -58,16 +58,15 @@ Status = py_trees.common.Status
 def freeze_startup_heap() -> int:
     """Take everything alive now out of the cyclic garbage collector's reach; once per process.
 
-    A full (generation 2) collection walks every tracked object. Once numpy, MuJoCo,
-    scipy, mink, coal, py_trees and matplotlib are imported that is about 120 000 objects
-    and one collection stops every thread for 27-57 ms (measured on the 2-core machine);
-    CPython starts one when the long-lived objects have grown by a quarter, so about once
-    in a run, wherever the tick happens to be. After ``gc.collect(); gc.freeze()`` the
-    libraries, the worlds and the tree are in the permanent generation and later full
-    collections walk only what was made since (Python docs, ``gc.freeze``). Frozen objects
-    are never collected as cycles, so this is done once per process (later calls do
-    nothing) and meant for a process that builds its executive once. Returns the number
-    of objects frozen.
+    A full (generation 2) collection walks every tracked object and stops every thread while
+    it does. After ``gc.collect(); gc.freeze()`` the libraries, the worlds and the tree are in
+    the permanent generation and later full collections walk only what was made since (Python
+    docs, ``gc.freeze``). Frozen objects are never collected as cycles, so this is done once
+    per process (later calls do nothing) and meant for a process that builds its executive
+    once. Measurements: ``docs/workers.md``.
+
+    Returns:
+        The number of objects frozen.
     """
     if gc.get_freeze_count() == 0:
         gc.collect()
