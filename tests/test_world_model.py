@@ -61,7 +61,7 @@ risk:
   d_safety: 0.05
   collision: {exponent: 2, peak_weight: 0.5, exposure_weight: 0.5}
   fall: {sigmas: 2.0, exponent: 2}
-  weights: {collision: 1.0, fall: 2.0, grasp: 1.0}
+  weights: {collision: 1.0, fall: 2.0, drop: 1.0}
   severity: {collision: 3.0, fall: 10.0, drop: 2.0}
   ordering: expected_loss
   threshold: 0.3
