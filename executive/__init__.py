@@ -7,7 +7,8 @@ What an integrator needs is importable from here::
     executive = Executive(load("book_transfer"), approval=HostChannel("cell"), truth="exact")
 
 * running a mission: :class:`Executive`, :func:`freeze_startup_heap`; scenarios:
-  :func:`load` (a file or a bundled name), :func:`loads`, :func:`from_dict`;
+  :func:`load` (a file or a bundled name), :func:`loads`, :func:`from_dict` (their
+  ``allow_modules=`` names the modules a scenario's ``kind: module:Class`` may import);
 * the robot: :class:`RobotInterface` (what the executive uses of a robot), :class:`HostRobot`
   (a host's own robot behind :class:`JointIO`);
 * approvals: :class:`HostChannel`, :class:`CallbackChannel`, :class:`PolicyChannel`,

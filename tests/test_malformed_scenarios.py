@@ -5,14 +5,19 @@ document written back) and runs ``executive validate`` in process: exit 2, one m
 file and the key path, no traceback. The kinds: duplicate keys, absurd and out-of-range numbers
 (1e308, 1e300, nan, inf and just past each range), settings that switch a safety check off,
 impossible scenes, body-part typos, misleading messages (tiny sizes, non-model MJCF files) and
-profile paths that used to crash (a symlink loop, a NUL byte, ``~nosuchuser``). The last tests
-check that what people write and mean (``5e-2``, extreme but valid numbers) still loads.
+profile paths that used to crash (a symlink loop, a NUL byte, ``~nosuchuser``), missions whose
+tasks the objects in hand do not allow (a place of an object nothing picked), and hostile task
+kinds (``kind: this:Zen``, ``os:system``, ``subprocess:Popen``: refused before anything is
+imported, unless the run allows the module). The last tests check that what people write and
+mean (``5e-2``, extreme but valid numbers) still loads.
 """
 
 from __future__ import annotations
 
 import copy
 import math
+import os
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,8 +27,11 @@ import pytest
 import yaml
 from scenario_docs import walk  # tests/ is on sys.path (pytest's default prepend import mode)
 
+from executive import scenario as scenarios
 from executive.cli.main import main
+from executive.errors import ScenarioError
 from executive.schema import catalog as registry
+from executive.tasks.registry import ALLOW_ENV
 
 Doc = dict[str, Any]
 SOURCE = registry.scenario_path("book_transfer").read_text()
@@ -545,7 +553,54 @@ OBSTACLE_LOSS = [
     ),
 ]
 
-CASES = [*DUPLICATES, *NUMBERS, *SAFETY, *SCENES, *BODY_PARTS, *PATHS, *OBSTACLE_LOSS]
+# --- missions the objects in hand do not allow (the bundled book: picked, placed, pushed, pressed)
+PICK = {"pick": {"object": "book"}}
+PLACE = {"place": {"object": "book", "to": [0.52, -0.26]}}
+PUSH = {"push": {"object": "book", "to": [0.45, 0.26]}}
+PRESS = {"press": {"target": "book_stack", "point": [0.62, 0.0, 1.10], "force": 10, "duration": 1.0}}
+TRANSFER = {"transfer": {"object": "book", "to": [0.52, -0.26]}}
+MISSIONS = [
+    Case(
+        "place-unpicked",
+        put(("mission", [PLACE])),
+        "mission[0].place",
+        "'book' is not in hand (nothing picked it)",
+    ),
+    Case(
+        "place-placed",
+        put(("mission", [PICK, PLACE, {"place": {"object": "book", "to": [0.45, -0.40]}}])),
+        "mission[2].place",
+        "'book' is not in hand (it was put down by mission[1].place)",
+    ),
+    Case(
+        "place-after-transfer",
+        put(("mission", [TRANSFER, {"place": {"object": "book", "to": [0.45, 0.26]}}])),
+        "mission[1].place",
+        "nothing picked it",
+    ),
+    Case(
+        "pick-held",
+        put(("mission", [PICK, PICK, PLACE])),
+        "mission[1].pick",
+        "a pick needs its object on the table",
+    ),
+    Case("transfer-held", put(("mission", [PICK, TRANSFER, PLACE])), "mission[1].transfer", "still in hand"),
+    Case("push-held", put(("mission", [PICK, PUSH, PLACE])), "mission[1].push", "still in hand"),
+    Case("press-held", put(("mission", [PICK, PRESS, PLACE])), "mission[1].press", "still in hand"),
+]
+
+# --- hostile task kinds: a scenario is data; its dotted kinds import nothing unless allowed
+HOSTILE = [
+    Case(
+        f"kind-{path.replace(':', '-')}",
+        put(("mission", [{"kind": path, "object": "book"}])),
+        "mission[0].kind",
+        f"would import the module '{path.split(':')[0]}', which is not allowed",
+    )
+    for path in ("this:Zen", "os:system", "subprocess:Popen", "os.path:join", "tripwire_never:Kind")
+]
+
+CASES = [*DUPLICATES, *NUMBERS, *SAFETY, *SCENES, *BODY_PARTS, *PATHS, *OBSTACLE_LOSS, *MISSIONS, *HOSTILE]
 
 
 def _write(case: Case, tmp_path: Path) -> Path:
@@ -561,7 +616,8 @@ def _write(case: Case, tmp_path: Path) -> Path:
 
 def test_at_least_100_distinct_cases_of_every_kind() -> None:
     assert len({case.id for case in CASES}) == len(CASES) >= 100
-    assert all(len(kind) >= 5 for kind in (DUPLICATES, NUMBERS, SAFETY, SCENES, BODY_PARTS, PATHS))
+    kinds = (DUPLICATES, NUMBERS, SAFETY, SCENES, BODY_PARTS, PATHS, MISSIONS, HOSTILE)
+    assert all(len(kind) >= 5 for kind in kinds)
 
 
 @pytest.mark.parametrize("case", CASES, ids=[case.id for case in CASES])
@@ -576,6 +632,97 @@ def test_validate_rejects_with_file_and_key_path(
     assert f"{path}: {case.key_path}" in err, err
     assert case.message in err, err
     assert len(err.strip().splitlines()) == 1, err  # one message
+
+
+def test_a_hostile_kind_is_refused_unimported(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """``kind: this:Zen`` used to print the Zen of Python before the kind was refused."""
+    monkeypatch.delenv(ALLOW_ENV, raising=False)
+    monkeypatch.delitem(sys.modules, "this", raising=False)
+    path = _write(HOSTILE[0], tmp_path)
+    assert main(["validate", str(path)]) == 2
+    out, err = capsys.readouterr()
+    assert "this:Zen" in err and "--allow-module this" in err and f"{ALLOW_ENV}=this" in err, err
+    assert "Zen of Python" not in out + err and "this" not in sys.modules
+
+
+TRIPWIRE = "tripwire_kind"
+
+
+@pytest.fixture
+def tripwire(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
+    """A module on ``sys.path`` whose import writes a file (returned; absent until it is imported)."""
+    mark = tmp_path / "imported.txt"
+    (tmp_path / f"{TRIPWIRE}.py").write_text(f"open({str(mark)!r}, 'w').write('imported')\n")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, TRIPWIRE, raising=False)
+    monkeypatch.delenv(ALLOW_ENV, raising=False)
+    return mark
+
+
+def _tripwire_doc() -> Doc:
+    data: Doc = yaml.safe_load(SOURCE)
+    data["mission"] = [{"kind": f"{TRIPWIRE}:Kind", "object": "book"}]
+    return data
+
+
+@pytest.mark.parametrize("allowed_by", ["flag", "environment", "environment list"])
+def test_a_dotted_kind_imports_its_module_only_when_allowed(
+    tripwire: Path,
+    tmp_path: Path,
+    capsys: pytest.CaptureFixture[str],
+    monkeypatch: pytest.MonkeyPatch,
+    allowed_by: str,
+) -> None:
+    path = tmp_path / "case.yaml"
+    path.write_text(yaml.safe_dump(_tripwire_doc(), sort_keys=False))
+    monkeypatch.setenv(ALLOW_ENV, "other_module, tripwire")  # neither names the module
+    assert main(["validate", str(path), "--allow-module", f"{TRIPWIRE}_other"]) == 2
+    err = capsys.readouterr().err
+    assert f"{path}: mission[0].kind: task kind '{TRIPWIRE}:Kind' would import" in err, err
+    assert not tripwire.exists()
+    if allowed_by == "flag":
+        argv = ["validate", str(path), "--allow-module", "other", "--allow-module", TRIPWIRE]
+    else:
+        monkeypatch.setenv(ALLOW_ENV, TRIPWIRE if allowed_by == "environment" else f"x,{TRIPWIRE}")
+        argv = ["validate", str(path)]
+    assert main(argv) == 2  # imported, then refused: it has no Kind
+    err = capsys.readouterr().err
+    assert tripwire.exists() and f"module '{TRIPWIRE}' has no 'Kind'" in err, err
+    if allowed_by == "flag":  # the flag allowed it for that command only
+        assert os.environ[ALLOW_ENV] == "other_module, tripwire"
+
+
+@pytest.mark.parametrize("api", ["from_dict", "loads", "load"])
+def test_the_loading_functions_import_only_what_they_are_allowed(
+    tripwire: Path, tmp_path: Path, api: str
+) -> None:
+    data = _tripwire_doc()
+    path = tmp_path / "case.yaml"
+    path.write_text(yaml.safe_dump(data, sort_keys=False))
+    calls = {
+        "from_dict": lambda **kw: scenarios.from_dict(data, **kw),
+        "loads": lambda **kw: scenarios.loads(path.read_text(), **kw),
+        "load": lambda **kw: scenarios.load(path, **kw),
+    }
+    with pytest.raises(ScenarioError, match="would import the module 'tripwire_kind'") as info:
+        calls[api]()
+    assert info.value.key_path == "mission[0].kind" and not tripwire.exists()
+    with pytest.raises(ScenarioError, match="module 'tripwire_kind' has no 'Kind'"):
+        calls[api](allow_modules=[TRIPWIRE])
+    assert tripwire.exists()
+
+
+def test_a_name_allows_its_module_and_submodules_only() -> None:
+    from executive.tasks.registry import TaskKindError, get
+
+    for allow in (["nosuch"], ["nosuch.sub"]):  # allowed: imported (and not found)
+        with pytest.raises(TaskKindError, match=r"cannot import 'nosuch\.sub'"):
+            get("nosuch.sub:Kind", allow_modules=allow)
+    for allow in (["nosuc"], ["nosuch.sub.deeper"], ["nosuch.subway"], []):
+        with pytest.raises(TaskKindError, match=r"would import the module 'nosuch\.sub'"):
+            get("nosuch.sub:Kind", allow_modules=allow)
 
 
 def test_a_duplicate_key_names_both_lines(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:

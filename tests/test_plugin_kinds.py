@@ -2,6 +2,9 @@
 examples/plugin_kind, found by an entry point and by a dotted path, planned with the real
 planner and run in MuJoCo; bad kinds give located errors (exit 2, no traceback).
 
+A dotted path imports its module only when the run allows it (``load(..., allow_modules=...)``,
+``--allow-module``, ``EXECUTIVE_ALLOW_MODULES``); the fixture clears that variable.
+
 The entry point is a real installed distribution's metadata: a ``<name>.dist-info`` folder
 with ``METADATA`` and ``entry_points.txt`` on ``sys.path``, read by ``importlib.metadata``
 as pip's would be. The plug-in module is the example's file copied under a name no other
@@ -45,6 +48,7 @@ def plugin_dir(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> Path:
     monkeypatch.syspath_prepend(str(tmp_path))
     monkeypatch.delitem(sys.modules, MODULE, raising=False)
     monkeypatch.setattr(registry, "_registered", {})
+    monkeypatch.delenv(registry.ALLOW_ENV, raising=False)
     importlib.invalidate_caches()
     return tmp_path
 
@@ -77,14 +81,14 @@ def _scenario_file(folder: Path, task: dict[str, Any]) -> Path:
     return path
 
 
-def _plan_and_run(path: Path) -> tuple[RunResult, float, float]:
+def _plan_and_run(path: Path, allow: tuple[str, ...] = ()) -> tuple[RunResult, float, float]:
     """Load, plan the ``right`` alternative with the real planner, run it in MuJoCo (truth = estimate).
 
     Returns:
         The run, how far the planned wave put the hand from its point (forward kinematics of
         the planned joint angles), and how far from home the hand ended in the truth world (m).
     """
-    scenario = load(path)
+    scenario = load(path, allow_modules=allow)
     task = scenario.mission[0]
     assert type(task).__module__ == MODULE
     estimate = build(scenario)
@@ -113,13 +117,15 @@ def test_dotted_path_kind_plans_and_runs(plugin_dir: Path) -> None:
     path = _scenario_file(
         plugin_dir, {"kind": f"{MODULE}:WaveKind", "at": AT, "height": HEIGHT, "alternatives": ["right"]}
     )
-    result, reach, back = _plan_and_run(path)
+    result, reach, back = _plan_and_run(path, allow=(MODULE,))
     assert result.success, result.message
     assert reach < 0.01 and back < 0.03
 
 
 @pytest.mark.parametrize("found_by", ["entry point", "dotted path"])
-def test_plugin_kind_runs_through_the_executive(plugin_dir: Path, found_by: str) -> None:
+def test_plugin_kind_runs_through_the_executive(
+    plugin_dir: Path, found_by: str, monkeypatch: pytest.MonkeyPatch
+) -> None:
     # The executive's physics check runs dry runs and rollouts in spawned worker processes,
     # which find the kind again: by its entry point, or beside its task's class (dotted path).
     if found_by == "entry point":
@@ -127,6 +133,7 @@ def test_plugin_kind_runs_through_the_executive(plugin_dir: Path, found_by: str)
         task: dict[str, Any] = {"wave": {"at": AT, "height": HEIGHT}}
     else:
         task = {"kind": f"{MODULE}:WaveKind", "at": AT, "height": HEIGHT}
+        monkeypatch.setenv(registry.ALLOW_ENV, MODULE)  # Executive(path) loads the file itself
     executive = Executive(_scenario_file(plugin_dir, task), approval="deny", truth="exact", background=False)
     while not executive.done:
         executive.tick()
@@ -136,8 +143,8 @@ def test_plugin_kind_runs_through_the_executive(plugin_dir: Path, found_by: str)
     assert row["chosen"] in ("left", "right") and row["approval"] is None  # below the threshold
 
 
-def _validate(path: Path, capsys: pytest.CaptureFixture[str]) -> str:
-    code = main(["validate", str(path)])
+def _validate(path: Path, capsys: pytest.CaptureFixture[str], *allow: str) -> str:
+    code = main(["validate", str(path), *(a for m in allow for a in ("--allow-module", m))])
     out, err = capsys.readouterr()
     assert code == 2, out + err
     assert "Traceback" not in out + err
@@ -166,6 +173,6 @@ def test_bad_kinds_are_located(
     # A kind that takes a built-in kind's name (appended to the plug-in module).
     with (plugin_dir / f"{MODULE}.py").open("a") as module:
         module.write("\n\nclass Transfer(WaveKind):\n    name = 'transfer'\n")
-    err = _validate(_scenario_file(plugin_dir, task), capsys)
+    err = _validate(_scenario_file(plugin_dir, task), capsys, MODULE, "no_such_module")
     for word in words:
         assert word in err, err

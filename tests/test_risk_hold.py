@@ -22,6 +22,7 @@ from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.detectors import FailureDetector
 from executive.planning.plan import AlternativePlan
 from executive.planning.planner import Planner
+from executive.risk import hold
 from executive.risk.collision import CollisionModel
 from executive.risk.hold import (
     CarrySpan,
@@ -37,6 +38,7 @@ from executive.risk.hold import (
     hold_problem,
     object_pose_at,
     patch,
+    receiver_critical_mass,
     site_pose_at,
     slip_critical_mass,
     squaring_turn,
@@ -232,6 +234,22 @@ def test_probability_matches_monte_carlo_over_the_truth_sampler(heavy: tuple[Wor
 
 
 # ----------------------------------------------------------------------------- plans
+
+
+def test_a_handover_that_does_not_turn_the_object_divides_nothing_by_zero(
+    heavy: tuple[World, AlternativePlan], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # No creep turn (tilt 0) and a yaw error that leaves no room to turn: the bisection's upper
+    # bound is the mass cap, not room / |tilt| = 0 / 0 (pytest makes a RuntimeWarning an error).
+    world, plan = heavy
+    problem = hold_problem(world, plan)
+    miss, (_, giver) = problem.misses[0], problem.spans[0]
+    offsets = np.array([-0.01, 0.0, 0.01])
+    tilt, moment = creep_tilt_per_kg(miss, giver, offsets, 1.0)
+    monkeypatch.setattr(hold, "creep_tilt_per_kg", lambda *_: (np.zeros_like(tilt), moment))
+    yaw = np.full(len(offsets), np.pi / 2 / miss.squaring + 0.1)  # room = max(pi/2 - |yaw| s, 0) = 0
+    masses = receiver_critical_mass(miss, giver, offsets, 1.0, 50.0, yaw)
+    assert not np.isnan(masses).any()
 
 
 def test_heavy_box_handover_is_risky_and_the_book_is_not(heavy: tuple[World, AlternativePlan]) -> None:

@@ -2,7 +2,7 @@
 
     mission:
       - wave: {at: [0.45, 0.10], height: 0.15}           # found by its entry point
-      - kind: wave_kind:WaveKind                            # or named by its dotted path
+      - kind: wave_kind:WaveKind                            # or by its dotted path (allowed)
         at: [0.45, 0.10]
         alternatives: [left]
 
@@ -14,8 +14,10 @@ comes home; nothing is touched. Register it with an entry point in your package'
     [project.entry-points."executive.task_kinds"]
     wave = "wave_kind:WaveKind"
 
-or by its dotted path in the YAML (the module on ``sys.path``), or in code with
-``executive.plugin.register(WaveKind)``. It imports only from :mod:`executive.plugin`, the
+or by its dotted path in the YAML (the module on ``sys.path``; a scenario imports it only
+when the run allows it: ``executive validate FILE --allow-module wave_kind``,
+``EXECUTIVE_ALLOW_MODULES=wave_kind``, or ``load(FILE, allow_modules=["wave_kind"])``), or in
+code with ``executive.plugin.register(WaveKind)``. It imports only from :mod:`executive.plugin`, the
 facade for plug-in kinds. See docs/task_kinds.md.
 """
 

@@ -23,6 +23,7 @@ from executive.errors import ExecutiveError
 from executive.schema import catalog as registry
 from executive.schema.failure_modes import ScenarioDeprecationWarning
 from executive.schema.types import Scenario
+from executive.tasks.registry import ALLOW_ENV, allowing_modules
 from executive.world.model import World, build
 
 if TYPE_CHECKING:
@@ -422,6 +423,15 @@ def _parser() -> argparse.ArgumentParser:
     tree_command.add_parser(sub, _SCENARIO_HELP)
     replay_command.add_parser(sub, _PIXELS, _PORT)
     _add_console(sub)
+    for name, command in sub.choices.items():
+        if name != "list":  # every command that loads a scenario
+            command.add_argument(
+                "--allow-module",
+                action="append",
+                default=[],
+                metavar="MODULE",
+                help=f"let `kind: MODULE:Class` tasks import MODULE (repeatable; or {ALLOW_ENV}=M1,M2)",
+            )
     return parser
 
 
@@ -563,7 +573,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     warnings.showwarning = _show_scenario_warning(args.command)
     func: Callable[[argparse.Namespace], int] = args.func
     try:
-        return func(args)
+        with allowing_modules(getattr(args, "allow_module", ())):
+            return func(args)
     except ExecutiveError as exc:
         print(f"executive {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -200,9 +200,9 @@ def receiver_critical_mass(
         )
         return np.asarray(move @ miss.approach, dtype=float)
 
-    with np.errstate(divide="ignore"):
-        room = np.maximum(0.5 * np.pi - np.abs(yaws) * miss.squaring, 0.0)
-        hi = np.minimum(mass_cap, np.where(tilt != 0.0, room / np.abs(tilt), mass_cap))
+    room = np.maximum(0.5 * np.pi - np.abs(yaws) * miss.squaring, 0.0)
+    turning = tilt != 0.0  # divided only where the object turns: no 0/0 where it does not
+    hi = np.minimum(mass_cap, np.divide(room, np.abs(tilt), out=np.full_like(room, mass_cap), where=turning))
     lo = np.zeros(len(offsets))
     rec = miss.receiver_span
     rec_offsets = offsets * miss.lateral_shift

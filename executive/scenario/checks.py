@@ -10,8 +10,10 @@
 * the table, a task's object or its target far outside the robot's reach (the reach measured in
   the robot's MJCF, :mod:`executive.robot.model`; ``REACH_SLACK`` beyond it);
 * a task between a pick and the place of the object it picked (not supported: the physics
-  checks and the detectors follow one object in hand, that task's own). What a task leaves
-  in hand or needs there is its kind's ``leaves_held`` / ``needs_held``
+  checks and the detectors follow one object in hand, that task's own): a second pick of it
+  (a pick needs its object on the table), a transfer, push or press (they need the hands free);
+* a place of an object not in hand (nothing picked it, or an earlier place put it down).
+  What a task leaves in hand or needs there is its kind's ``leaves_held`` / ``needs_held``
   (:class:`executive.tasks.base.TaskKind`).
 
 Types and ranges are the readers' job (:mod:`executive.schema.readers`); this module assumes
@@ -79,28 +81,54 @@ def check_scene(root: Node, scenario: Scenario, facts: RobotFacts | None) -> Non
         if not task.object:
             continue
         if getattr(task, "to", None) is not None:
-            placed = _check_target(root, f"mission[{t}].{task.kind}", task, scenario, now, obstacles)
+            placed = _check_target(root, _task_path(root, t, task.kind), task, scenario, now, obstacles)
             now = [*(o for o in now if o.name != task.object), placed]
         elif task_kind(task.kind).leaves_held:
             now = [o for o in now if o.name != task.object]
 
 
 def _check_in_hand(root: Node, scenario: Scenario) -> None:
-    """Fail at a task that comes after a pick and before the place of the object picked.
+    """Fail at a task the objects in hand do not allow, following what each task leaves held.
 
-    A pick is a task whose kind ``leaves_held`` its object, a place one whose kind ``needs_held`` it.
+    A pick is a task whose kind ``leaves_held`` its object, a place one whose kind ``needs_held``
+    it. A place needs its object in hand (picked earlier, not yet placed); while an object is
+    held only its place may come next (a pick needs its object on the table, and every other
+    task the hands free).
     """
     picked: tuple[str, str] | None = None  # (key path of the pick, object) in hand
+    placed: dict[str, str] = {}  # object -> key path of the place that last put it down
     for t, task in enumerate(scenario.mission):
         kind = task_kind(task.kind)
+        path = _task_path(root, t, task.kind)
         if picked is not None and not (kind.needs_held and task.object == picked[1]):
+            again = kind.leaves_held and task.object == picked[1]
+            why = (
+                "a pick needs its object on the table"
+                if again
+                else "a task while an object is held is not supported"
+            )
+            held = f"'{picked[1]}' is still in hand (picked by {picked[0]})"
+            _fail(root, path, f"{held}: only its place may come next; {why}")
+        if kind.needs_held and picked is None:
+            since = (
+                f"it was put down by {placed[task.object]}" if task.object in placed else "nothing picked it"
+            )
             _fail(
                 root,
-                f"mission[{t}].{task.kind}",
-                f"'{picked[1]}' is still in hand (picked by {picked[0]}): only its "
-                "place may come next; a task while an object is held is not supported",
+                path,
+                f"'{task.object}' is not in hand ({since}): a {task.kind} needs its object held; "
+                f"pick it in the task before",
             )
-        picked = (f"mission[{t}].{task.kind}", task.object) if kind.leaves_held else None
+        if kind.needs_held:
+            placed[task.object] = path
+        picked = (path, task.object) if kind.leaves_held else None
+
+
+def _task_path(root: Node, t: int, kind: str) -> str:
+    """The key path of task ``t``'s block: ``mission[t].kind``, or ``mission[t]`` for a dotted kind."""
+    mission = root.value.get("mission") if isinstance(root.value, dict) else None
+    item = mission[t] if isinstance(mission, list) and t < len(mission) else None
+    return f"mission[{t}]" if isinstance(item, dict) and "kind" in item else f"mission[{t}].{kind}"
 
 
 def _placed(
@@ -274,7 +302,7 @@ def _check_reach(root: Node, scenario: Scenario, facts: RobotFacts) -> None:
         z = to[2] if to[2] is not None else table.height + body.half_height()
         for path, point in (
             (f"scene.objects[{i}].position", body.position),
-            (f"mission[{t}].{task.kind}.to", (to[0], to[1], z)),
+            (f"{_task_path(root, t, task.kind)}.to", (to[0], to[1], z)),
         ):
             d = float(np.linalg.norm(np.asarray(point) - base)) - radius
             if d > limit:

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from pathlib import Path
 from typing import TypeVar
 
@@ -73,29 +73,48 @@ _TOP_REQUIRED = ("name", "robot", "scene", "mission")
 _TOP_OPTIONAL = ("description", "uncertainty", "risk", "approval", "trials")
 
 
-def load(name_or_path: str | Path) -> Scenario:
-    """Load a bundled scenario by name, or a scenario file by path."""
+def load(name_or_path: str | Path, *, allow_modules: Iterable[str] = ()) -> Scenario:
+    """Load a bundled scenario by name, or a scenario file by path.
+
+    Args:
+        name_or_path: a bundled scenario's name or a YAML file.
+        allow_modules: the modules its ``kind: package.module:Class`` tasks may import (besides
+            those ``EXECUTIVE_ALLOW_MODULES`` names); any other dotted kind is refused unimported.
+
+    Raises:
+        ScenarioError: the file is invalid, at the key path at fault.
+    """
     path = registry.scenario_path(name_or_path)
     root = load_yaml_file(path)
-    scenario = _scenario(root, path.parent)
+    scenario = _scenario(root, path.parent, allow_modules)
     return dataclasses.replace(scenario, source=path)
 
 
-def loads(text: str, source: str = "<string>", base_dir: Path | None = None) -> Scenario:
-    """Load a scenario from YAML text; relative paths resolve against ``base_dir`` (default: cwd)."""
+def loads(
+    text: str, source: str = "<string>", base_dir: Path | None = None, *, allow_modules: Iterable[str] = ()
+) -> Scenario:
+    """Load a scenario from YAML text; relative paths resolve against ``base_dir`` (default: cwd).
+
+    ``allow_modules`` as :func:`load`'s.
+    """
     root = load_yaml_text(text, source)
-    return _scenario(root, base_dir if base_dir is not None else Path.cwd())
+    return _scenario(root, base_dir if base_dir is not None else Path.cwd(), allow_modules)
 
 
-def from_dict(data: object, source: str = "<dict>", base_dir: Path | None = None) -> Scenario:
-    """Validate an already-parsed document (e.g. built in code) and build the scenario."""
+def from_dict(
+    data: object, source: str = "<dict>", base_dir: Path | None = None, *, allow_modules: Iterable[str] = ()
+) -> Scenario:
+    """Validate an already-parsed document (e.g. built in code) and build the scenario.
+
+    ``allow_modules`` as :func:`load`'s.
+    """
     root = Node(data, source)
     if not root.is_mapping():
         root.expected("a mapping at the top level")
-    return _scenario(root, base_dir if base_dir is not None else Path.cwd())
+    return _scenario(root, base_dir if base_dir is not None else Path.cwd(), allow_modules)
 
 
-def _scenario(root: Node, base_dir: Path) -> Scenario:
+def _scenario(root: Node, base_dir: Path, allow_modules: Iterable[str] = ()) -> Scenario:
     root.check_keys(_TOP_REQUIRED, _TOP_OPTIONAL)
     # Read in schema order, so the first error reported is the first in the document.
     name = root.get("name").string()
@@ -110,7 +129,7 @@ def _scenario(root: Node, base_dir: Path) -> Scenario:
         uncertainty=_optional(root, "uncertainty", _uncertainty, Uncertainty),
         risk=_optional(root, "risk", lambda n: _risk(n, scene), RiskConfig),
         approval=_optional(root, "approval", _approval, ApprovalConfig),
-        mission=_mission(root.get("mission"), scene),
+        mission=_mission(root.get("mission"), scene, tuple(allow_modules)),
         trials=_optional(root, "trials", _trials, TrialsConfig),
     )
     facts = robot_facts(robot.mjcf, profile)
@@ -198,8 +217,11 @@ def _is_plain_name(text: str) -> bool:
 # ----------------------------------------------------------------------------- mission
 
 
-def _mission(node: Node, scene: SceneConfig) -> tuple[Task, ...]:
-    """Each task: a mapping with one key, its kind (``transfer``, ...), or ``kind: package.module:Class``."""
+def _mission(node: Node, scene: SceneConfig, allow_modules: tuple[str, ...] = ()) -> tuple[Task, ...]:
+    """Each task: a mapping with one key, its kind (``transfer``, ...), or ``kind: package.module:Class``.
+
+    A dotted kind's module is imported only if ``allow_modules`` (or the environment) allows it.
+    """
     from executive.tasks.registry import TaskKindError, available, get
 
     tasks = []
@@ -208,16 +230,18 @@ def _mission(node: Node, scene: SceneConfig) -> tuple[Task, ...]:
             item.expected(f"a task mapping such as {{transfer: {{...}}}} (kinds: {', '.join(available())})")
         if isinstance(item.value, dict) and "kind" in item.value:
             # {kind: package.module:Class, <the kind's keys>}: a plug-in named by its dotted path
-            kind_name = item.get("kind").string()
+            kind_node = item.get("kind")
+            kind_name = kind_node.string()
             body = Node(
                 {k: v for k, v in item.value.items() if k != "kind"}, item.source, item.path, item.error
             )
         else:
             kind_name, body = item.single_key(f"the task kind: {', '.join(available())}")
+            kind_node = body
         try:
-            kind = get(kind_name)
+            kind = get(kind_name, allow_modules)
         except TaskKindError as error:
-            body.fail(str(error))
+            kind_node.fail(str(error))
         tasks.append(kind.read(body, scene))
     return tuple(tasks)
 

@@ -7,21 +7,42 @@ subclasses already imported (a worker process that unpickled a plug-in's task). 
 a class directly: ``kind: package.module:Class`` in a task block (see
 :func:`resolve`); it is then registered under its name, which its tasks' ``kind`` gives
 (a name another kind already has is refused). Kinds are imported only when first asked for.
+
+A dotted path's module is imported only when the caller allows it (a scenario is data, and
+importing a module runs its code): ``get("wave_kind:WaveKind", allow_modules=["wave_kind"])``,
+or the module named in the environment variable ``EXECUTIVE_ALLOW_MODULES`` (comma-separated;
+the CLI's ``--allow-module`` sets it for one command with :func:`allowing_modules`). A name
+allows that module and its submodules. Anything else is refused before any import.
 """
 
 from __future__ import annotations
 
 import importlib
 import inspect
+import os
+from collections.abc import Iterable, Iterator
+from contextlib import contextmanager
 from importlib import metadata
 
 from executive.errors import ExecutiveError
 from executive.schema.yaml_nodes import unknown_name
 from executive.tasks.base import TaskKind
 
-__all__ = ["ENTRY_POINT_GROUP", "TaskKindError", "available", "get", "register", "resolve"]
+__all__ = [
+    "ALLOW_ENV",
+    "ENTRY_POINT_GROUP",
+    "TaskKindError",
+    "allowed_modules",
+    "allowing_modules",
+    "available",
+    "get",
+    "register",
+    "resolve",
+]
 
 ENTRY_POINT_GROUP = "executive.task_kinds"
+#: The environment variable naming the modules a dotted kind may import (comma-separated).
+ALLOW_ENV = "EXECUTIVE_ALLOW_MODULES"
 
 #: The kinds that ship with the package, by YAML key.
 BUILT_IN: dict[str, str] = {
@@ -96,13 +117,63 @@ def _instance(target: object, where: str) -> TaskKind:
     return target
 
 
-def get(name: str) -> TaskKind:
-    """The kind called ``name`` (or at ``package.module:Class``).
+def allowed_modules(extra: Iterable[str] = ()) -> frozenset[str]:
+    """The modules a dotted kind may import: ``extra`` and those :data:`ALLOW_ENV` names."""
+    named = os.environ.get(ALLOW_ENV, "").split(",")
+    return frozenset(m.strip() for m in (*named, *extra) if m.strip())
+
+
+@contextmanager
+def allowing_modules(modules: Iterable[str]) -> Iterator[None]:
+    """Allow ``modules`` (besides those already allowed) while the block runs, in this process
+    and the worker processes it starts (through :data:`ALLOW_ENV`); restored afterwards."""
+    before = os.environ.get(ALLOW_ENV)
+    added = allowed_modules(modules)
+    if added:
+        os.environ[ALLOW_ENV] = ",".join(sorted(added))
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(ALLOW_ENV, None)
+        else:
+            os.environ[ALLOW_ENV] = before
+
+
+def _check_allowed(path: str, allow_modules: Iterable[str]) -> None:
+    """Refuse a dotted path whose module is not allowed, before anything is imported.
 
     Raises:
-        TaskKindError: no kind of that name; the message lists those available.
+        TaskKindError: the module is not allowed; the message says how to allow it.
+    """
+    module_name = path.partition(":")[0]
+    allowed = allowed_modules(allow_modules)
+    if any(module_name == m or module_name.startswith(m + ".") for m in allowed):
+        return
+    raise TaskKindError(
+        f"task kind '{path}' would import the module '{module_name}', which is not allowed "
+        f"(a scenario imports no module unless told to): allow it for this run with "
+        f"--allow-module {module_name} or {ALLOW_ENV}={module_name}, or in code "
+        f"load(..., allow_modules=['{module_name}'])"
+    )
+
+
+def get(name: str, allow_modules: Iterable[str] = ()) -> TaskKind:
+    """The kind called ``name`` (or at ``package.module:Class``).
+
+    Args:
+        name: a kind's name, or a dotted path ``package.module:Class``.
+        allow_modules: modules a dotted path may import (besides those :data:`ALLOW_ENV` names);
+            a name allows the module and its submodules.
+
+    Raises:
+        TaskKindError: no kind of that name (the message lists those available), or a dotted
+            path whose module is not allowed (nothing is imported then).
     """
     if ":" in name:
+        module_name, _, attr = name.partition(":")
+        if module_name and attr:
+            _check_allowed(name, allow_modules)
         return _register_path(name)
     if name in _registered:
         return _registered[name]
