@@ -352,9 +352,17 @@ class StepIK:
         close = np.flatnonzero(distances <= collisions.min_distance + _BOUND_SLACK)
         names = []
         for i in close.tolist():
-            a, b = (mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_GEOM, g) for g in collisions.pairs[i])
-            names.append(f"geoms '{a}' and '{b}' at their clearance ({distances[i] * 1000:.0f} mm)")
+            a, b = (self._geom_label(int(g)) for g in collisions.pairs[i])
+            names.append(f"{a} and {b} at their clearance ({distances[i] * 1000:.0f} mm)")
         return names
+
+    def _geom_label(self, geom: int) -> str:
+        """``geom 'name'``, or ``a geom of body 'name'`` for an unnamed geom."""
+        name = mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_GEOM, geom)
+        if name:
+            return f"geom '{name}'"
+        body = mujoco.mj_id2name(self.model, mujoco.mjtObj.mjOBJ_BODY, int(self.model.geom_bodyid[geom]))
+        return f"a geom of body '{body}'"
 
     def _failure(self, goal: PhaseGoal, iterations: int, what: str) -> StepPlanningError:
         """The error of a phase that stops short, naming what binds."""
