@@ -69,10 +69,10 @@ class StepConfig:
     Timing:
         speed_scale: fraction of the planner's timed joint speed limits a step uses.
         shift_duration, foot_duration: the shortest weight shift and foot phase (s).
-    Reach (:meth:`executive.planning.stepping.StepPlanner.reach`):
+    Reach (:func:`executive.planning.stepping_walk.measure_reach`):
         reach_probe: m (and rad, for the turn) the probe asks the swing foot to go in each
             direction; the IK stops where the leg's kinematics or a limit binds.
-        reach_fraction: :meth:`~executive.planning.stepping.StepPlanner.plan_steps` steps at most
+        reach_fraction: :func:`~executive.planning.stepping_walk.plan_steps` steps at most
             this fraction of the measured reach.
     """
 
@@ -160,7 +160,7 @@ class StepPlan:
 
 @dataclass(frozen=True)
 class StepReach:
-    """How far one foot can step from a stance, measured by IK (:meth:`StepPlanner.reach`).
+    """How far one foot can step from a stance, measured by IK (:func:`~executive.planning.stepping_walk.measure_reach`).
 
     Offsets are of the swing foot in the stance foot's frame, from where it stood: ``forward``
     and ``backward`` (m, along the stance foot's x), ``outward`` and ``inward`` (m, across it,
