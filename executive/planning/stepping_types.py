@@ -160,7 +160,8 @@ class StepPlan:
 
 @dataclass(frozen=True)
 class StepReach:
-    """How far one foot can step from a stance, measured by IK (:func:`~executive.planning.stepping_walk.measure_reach`).
+    """How far one foot can step from a stance, measured by IK
+    (:func:`~executive.planning.stepping_walk.measure_reach`).
 
     Offsets are of the swing foot in the stance foot's frame, from where it stood: ``forward``
     and ``backward`` (m, along the stance foot's x), ``outward`` and ``inward`` (m, across it,
