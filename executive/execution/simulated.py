@@ -10,6 +10,7 @@ at the end of the period.
 from __future__ import annotations
 
 import time
+from collections.abc import Collection, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,9 +22,14 @@ from executive.monitoring.detectors import Failure, FailureDetector
 from executive.world.model import World
 from executive.world.observation import SimulatedSensor
 
-__all__ = ["JointTargetController", "SimulatedRobot"]
+__all__ = ["STANCE_MOMENT_LENGTH", "JointTargetController", "SimulatedRobot"]
 
 FloatArray = NDArray[np.float64]
+
+#: m: in a stance of several feet (:meth:`JointTargetController.leg_loads`) a foot's moment costs as
+#: much as a force at this lever arm: the feet's vertical forces carry the base, their moments
+#: only what the forces cannot.
+STANCE_MOMENT_LENGTH = 0.01
 
 
 def _as_slice(index: NDArray[np.int_]) -> slice | NDArray[np.int_]:
@@ -51,7 +57,9 @@ class JointTargetController:
       ``J_c,base^T f = g_base`` in the *target* pose, so ``tau_legs = g_legs - J_c,legs^T f``
       is the torque that holds the planned pose without any sag. It is a model-based
       feed-forward (computed once per new target), not a measured one: feeding back the
-      measured contact forces would cancel the ankles' stiffness against toppling.
+      measured contact forces would cancel the ankles' stiffness against toppling. A stepping
+      behaviour names the feet on the floor (:meth:`leg_loads`' ``stance``): the stance foot
+      alone carries the body while the other swings.
 
     Gripper actuators are left to :meth:`SimulatedRobot.set_gripper`.
     """
@@ -70,6 +78,7 @@ class JointTargetController:
         self.model = model
         self._scratch = mujoco.MjData(model)
         self.feet = [int(model.body(foot.body).id) for foot in world.profile.feet.values()]
+        self.foot_sides: tuple[str, ...] = tuple(world.profile.feet)
         free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
         base = next(j for j in free if int(model.jnt_bodyid[j]) == world.ids.base_body)
         self.base_dofs = np.arange(int(model.jnt_dofadr[base]), int(model.jnt_dofadr[base]) + 6)
@@ -110,12 +119,25 @@ class JointTargetController:
         self.ctrl_low = model.actuator_ctrlrange[self.actuators, 0]
         self.ctrl_high = model.actuator_ctrlrange[self.actuators, 1]
 
-    def leg_load(self, q_target: FloatArray) -> FloatArray:
-        """Static torque of each leg actuator holding ``q_target`` on both feet (0 elsewhere):
-        :meth:`leg_loads` of the one target."""
-        return self.leg_loads(np.asarray(q_target, dtype=float)[None, :])[0]
+    def leg_load(self, q_target: FloatArray, stance: Collection[str] | None = None) -> FloatArray:
+        """Static torque of each leg actuator holding ``q_target`` (0 elsewhere): :meth:`leg_loads`
+        of the one target.
 
-    def leg_loads(self, q_targets: FloatArray) -> FloatArray:
+        Args:
+            q_target: a full-model qpos.
+            stance: the feet (sides of ``profile.feet``) that carry the body, sharing it as the
+                target's CoM puts it on them; None: all feet, the minimum-norm split (see
+                :meth:`leg_loads`).
+
+        Returns:
+            The torque of each actuator of ``self.actuators`` (N m; 0 but on the legs).
+        """
+        rows = None if stance is None else [stance]
+        return self.leg_loads(np.asarray(q_target, dtype=float)[None, :], rows)[0]
+
+    def leg_loads(
+        self, q_targets: FloatArray, stance: Sequence[Collection[str] | None] | None = None
+    ) -> FloatArray:
         """:meth:`leg_load` of each row of ``q_targets`` (N, nq): (N, actuators).
 
         Per target, MuJoCo's gravity torques (``mj_rne`` at rest) and the feet's Jacobians; the
@@ -124,7 +146,22 @@ class JointTargetController:
         ``f = A^T (A A^T)^-1 g_base`` (what ``numpy.linalg.lstsq`` returns, to rounding), solved
         for all targets in one batch. A stream of targets known ahead
         (:class:`behaviours.move_hand.MoveHand`) asks for half a second of them at once.
+
+        ``stance`` (one entry per target; None: the split above for every target) names the feet
+        that carry the body at each target (sides of ``profile.feet``). Their wrenches balance
+        the whole base, a foot left out carrying only its own leg's links (its wrench is zero):
+        one foot takes all of it; several share it as the target's CoM puts it on them, the
+        wrenches with the least foot moments (:data:`STANCE_MOMENT_LENGTH`; the vertical forces
+        then follow the lever rule, so the load moves onto a foot as the CoM moves over it,
+        unlike the minimum-norm split, which keeps the forces equal and twists the feet
+        against each other). An entry of None is the minimum-norm split above.
+
+        Raises:
+            ValueError: when ``stance`` has not one entry per target, or names no foot or a foot
+                the robot does not have.
         """
+        if stance is not None:
+            return self._stance_loads(np.asarray(q_targets, dtype=float), stance)
         q_targets = np.asarray(q_targets, dtype=float)
         n = len(q_targets)
         model, d = self.model, self._scratch
@@ -154,6 +191,47 @@ class JointTargetController:
             gravity[:, self._leg_take] - np.matmul(legs.transpose(0, 2, 1), wrench[:, :, None])[:, :, 0]
         )
         return loads
+
+    def _stance_loads(self, q_targets: FloatArray, stance: Sequence[Collection[str] | None]) -> FloatArray:
+        """:meth:`leg_loads` with a ``stance`` per target: the targets on all feet through the
+        all-feet batch, each other one with the base wrench on its stance feet alone."""
+        if len(stance) != len(q_targets):
+            raise ValueError(f"stance has {len(stance)} entries for {len(q_targets)} targets")
+        masks = [self._stance_mask(s) for s in stance]
+        loads = np.zeros((len(q_targets), len(self.dof_adr)))
+        default = [k for k, m in enumerate(masks) if m is None]
+        if default:
+            loads[default] = self.leg_loads(q_targets[default])
+        model, d = self.model, self._scratch
+        gravity = np.empty(model.nv)
+        jac = np.empty((6 * len(self.feet), model.nv))
+        # Weighted least norm: a foot moment (N m) costs as a force (N) at STANCE_MOMENT_LENGTH.
+        weight = np.tile([1.0, 1.0, 1.0] + [STANCE_MOMENT_LENGTH**2] * 3, len(self.feet))
+        d.qvel[:] = 0.0
+        for k, mask in enumerate(masks):
+            if mask is None:
+                continue
+            d.qpos[:] = q_targets[k]
+            mujoco.mj_kinematics(model, d)
+            mujoco.mj_comPos(model, d)
+            mujoco.mj_rne(model, d, 0, gravity)
+            for i, foot in enumerate(self.feet):
+                mujoco.mj_jacBody(model, d, jac[6 * i : 6 * i + 3], jac[6 * i + 3 : 6 * i + 6], foot)
+            rows = np.repeat(mask, 6)
+            base = jac[rows][:, self._base_take]  # A^T of the stance feet
+            scaled = weight[rows][:, None] * base  # W^-1 A^T
+            wrench = scaled @ np.linalg.solve(base.T @ scaled, gravity[self._base_take])
+            loads[k, self._support_take] = gravity[self._leg_take] - jac[rows][:, self._leg_take].T @ wrench
+        return loads
+
+    def _stance_mask(self, stance: Collection[str] | None) -> NDArray[np.bool_] | None:
+        """Which of ``self.feet`` carry the body (None: the default minimum-norm split)."""
+        if stance is None:
+            return None
+        unknown = set(stance) - set(self.foot_sides)
+        if unknown or not stance:
+            raise ValueError(f"stance {sorted(stance)} must name some of the feet {list(self.foot_sides)}")
+        return np.array([side in stance for side in self.foot_sides], dtype=bool)
 
     def joint_ctrl(
         self,
