@@ -36,6 +36,7 @@ from executive.decision.risk_models import PlanContext, register_model, risk_mod
 from executive.monitoring.detectors import DetectorThresholds
 from executive.planning.plan import AlternativePlan
 from executive.planning.planner import Planner, PlanningError, Trajectory
+from executive.planning.timing import concatenate
 from executive.risk.collision import CollisionModel, CollisionProfile, KnotDistance, report_from_profile
 from executive.risk.combine import CombinedRisk, combine
 from executive.risk.fall import assess_fall
@@ -73,30 +74,6 @@ class AlternativeRisk:
     plan_s: float = 0.0
     assess_s: float = 0.0
     physics: dict[str, Any] | None = None  # the physics check's summary (executive.decision.physics_check)
-
-
-def concatenate(trajectories: list[Trajectory], name: str) -> Trajectory:
-    """One trajectory through every knot of ``trajectories`` in order (times made cumulative)."""
-    times, qpos, com = [], [], []
-    hands: dict[str, list[np.ndarray]] = {side: [] for side in trajectories[0].hand_paths}
-    offset = 0.0
-    for k, traj in enumerate(trajectories):
-        skip = 1 if k > 0 else 0  # a step starts where the previous ended: drop the repeated knot
-        times.append(traj.times[skip:] + offset)
-        qpos.append(traj.qpos[skip:])
-        com.append(traj.com_path[skip:])
-        for side in hands:
-            hands[side].append(traj.hand_paths[side][skip:])
-        offset += traj.duration
-    return Trajectory(
-        name=name,
-        times=np.concatenate(times),
-        qpos=np.concatenate(qpos),
-        hand_paths={side: np.concatenate(parts) for side, parts in hands.items()},
-        com_path=np.concatenate(com),
-        carried=None,
-        free_quat_adr=trajectories[0].free_quat_adr,
-    )
 
 
 def _collision_model(ctx: PlanContext) -> RiskReport:

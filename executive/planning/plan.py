@@ -14,12 +14,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.planning.planner import HandTarget, Trajectory
+from executive.planning.stepping import StepPlan
 from executive.schema.types import Task
 
 __all__ = ["AlternativePlan", "CompositionConfig", "Step", "StepKind", "held_at_start"]
 
 FloatArray = NDArray[np.float64]
-StepKind = Literal["move", "lift", "carry", "place", "retreat", "home", "grasp", "release", "push", "press"]
+StepKind = Literal[
+    "move", "lift", "carry", "place", "retreat", "home", "grasp", "release", "push", "press", "step"
+]
 
 
 @dataclass(frozen=True)
@@ -48,6 +51,8 @@ class Step:
     hand may touch; ``obj``: the object a grasp/release acts on (a home step: the one it keeps clear of);
     ``force``: the force (N, world frame) the hand exerts on the environment during a push or a press
     (the robot feels its reaction); ``hold_s``: how long a press keeps that force.
+    ``stance``: a ``step`` (a walk, ``side`` the foot that leads): the pelvis's goal (x, y, yaw rad;
+    yaw None: as it stands).
     """
 
     kind: StepKind
@@ -59,16 +64,21 @@ class Step:
     obj: str = ""
     force: tuple[float, float, float] | None = None
     hold_s: float = 0.0
+    stance: tuple[float, float, float | None] | None = None
 
 
 @dataclass(frozen=True)
 class AlternativePlan:
-    """An alternative planned on the estimate: its steps and one trajectory per motion step."""
+    """An alternative planned on the estimate: its steps and one trajectory per motion step.
+
+    ``walks``: per ``step`` step, the planned footsteps (its trajectory is theirs end to end).
+    """
 
     name: str
     task: Task
     steps: tuple[Step, ...]
     trajectories: dict[str, Trajectory] = field(default_factory=dict)
+    walks: dict[str, tuple[StepPlan, ...]] = field(default_factory=dict)
 
     @property
     def duration(self) -> float:

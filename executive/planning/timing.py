@@ -24,6 +24,7 @@ __all__ = [
     "TimedJoints",
     "Trajectory",
     "build_trajectory",
+    "concatenate",
     "interpolate_path",
     "min_jerk",
     "path_parameter",
@@ -453,3 +454,27 @@ def zmp_path(times: FloatArray, com: FloatArray, window: float = 0.1, gravity: f
     after = np.where((idx + h <= n - 1)[:, None], com[hi, :2], com[-1, :2])
     acc = (after - 2.0 * com[:, :2] + before) / (h * dt) ** 2
     return np.asarray(com[:, :2] - (com[:, 2:3] / gravity) * acc, dtype=float)
+
+
+def concatenate(trajectories: list[Trajectory], name: str) -> Trajectory:
+    """One trajectory through every knot of ``trajectories`` in order (times made cumulative)."""
+    times, qpos, com = [], [], []
+    hands: dict[str, list[np.ndarray]] = {side: [] for side in trajectories[0].hand_paths}
+    offset = 0.0
+    for k, traj in enumerate(trajectories):
+        skip = 1 if k > 0 else 0  # a step starts where the previous ended: drop the repeated knot
+        times.append(traj.times[skip:] + offset)
+        qpos.append(traj.qpos[skip:])
+        com.append(traj.com_path[skip:])
+        for side in hands:
+            hands[side].append(traj.hand_paths[side][skip:])
+        offset += traj.duration
+    return Trajectory(
+        name=name,
+        times=np.concatenate(times),
+        qpos=np.concatenate(qpos),
+        hand_paths={side: np.concatenate(parts) for side, parts in hands.items()},
+        com_path=np.concatenate(com),
+        carried=None,
+        free_quat_adr=trajectories[0].free_quat_adr,
+    )

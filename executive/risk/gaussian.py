@@ -71,7 +71,7 @@ def union_bounds(probabilities: ArrayLike) -> tuple[float, float]:
 def independent_union(probabilities: ArrayLike) -> float:
     """P(any of the events) for independent events: 1 - prod(1 - p_i)."""
     p = np.clip(np.asarray(probabilities, dtype=float).ravel(), 0.0, 1.0)
-    return float(-np.expm1(np.sum(np.log1p(-p)))) if np.all(p < 1.0) else 1.0
+    return float(0.0 - np.expm1(np.sum(np.log1p(-p)))) if np.all(p < 1.0) else 1.0  # 0.0 - x: never -0.0
 
 
 def gauss_hermite_normal(order: int) -> tuple[FloatArray, FloatArray]:

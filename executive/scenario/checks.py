@@ -278,12 +278,29 @@ def _check_target(
 # --- reach
 
 
-def _check_reach(root: Node, scenario: Scenario, facts: RobotFacts) -> None:
+def _stances(scenario: Scenario, facts: RobotFacts) -> list[np.ndarray]:
+    """Where the robot's base stands for each task: the start, then after every task whose kind
+    ``moves_base`` (a ``step``) the stance it walks to."""
     base = np.asarray(facts.base, dtype=float)
+    out = []
+    for task in scenario.mission:
+        out.append(base)
+        stance = getattr(task, "stance", None)
+        if task_kind(task.kind).moves_base and stance is not None:
+            base = np.array([stance[0], stance[1], base[2]])
+    return out
+
+
+def _check_reach(root: Node, scenario: Scenario, facts: RobotFacts) -> None:
+    stances = _stances(scenario, facts)
     limit = facts.max_reach + REACH_SLACK
     table = scenario.scene.table
+    reached = [
+        (float(np.linalg.norm(_nearest_on_table(table, b) - b)), b)
+        for b in stances or [np.asarray(facts.base)]
+    ]
+    d, base = min(reached, key=lambda r: r[0])
     nearest = _nearest_on_table(table, base)
-    d = float(np.linalg.norm(nearest - base))
     if d > limit:
         _fail(
             root,
@@ -297,6 +314,7 @@ def _check_reach(root: Node, scenario: Scenario, facts: RobotFacts) -> None:
         to = getattr(task, "to", None)
         if not task.object or to is None:
             continue
+        base = stances[t]
         i, body = objects[task.object]
         radius = 0.5 * math.sqrt(sum(s * s for s in body.size)) if body.shape == "box" else max(body.size)
         z = to[2] if to[2] is not None else table.height + body.half_height()
@@ -306,12 +324,17 @@ def _check_reach(root: Node, scenario: Scenario, facts: RobotFacts) -> None:
         ):
             d = float(np.linalg.norm(np.asarray(point) - base)) - radius
             if d > limit:
+                where = (
+                    "the robot's base"
+                    if t == 0 or np.array_equal(base, stances[0])
+                    else "where the robot stands then"
+                )
                 _fail(
                     root,
                     path,
                     f"'{task.object}' at ({_xyz(point)}) is far outside the robot's reach: "
                     f"its nearest side is "
-                    f"{d:.2f} m from the robot's base, and {facts.describe()}",
+                    f"{d:.2f} m from {where}, and {facts.describe()}",
                 )
 
 

@@ -65,12 +65,16 @@ class TaskKind(abc.ABC):
       task must be one that ``needs_held`` that object;
     * ``needs_held``: the task starts with its ``object`` in the hand an earlier task left it
       in (a ``place``).
+
+    ``moves_base``: the task ends with the robot standing elsewhere (a ``step``); later tasks
+    plan from the stance it ends in.
     """
 
     name: ClassVar[str] = ""
     alternative_names: ClassVar[tuple[str, ...]] = ()
     leaves_held: ClassVar[bool] = False
     needs_held: ClassVar[bool] = False
+    moves_base: ClassVar[bool] = False
 
     @abc.abstractmethod
     def read(self, node: Node, scene: SceneConfig) -> Task:

@@ -51,6 +51,7 @@ BUILT_IN: dict[str, str] = {
     "place": "executive.tasks.pick_place:PlaceKind",
     "push": "executive.tasks.push:PushKind",
     "press": "executive.tasks.press:PressKind",
+    "step": "executive.tasks.step:StepKind",
 }
 
 _registered: dict[str, TaskKind] = {}

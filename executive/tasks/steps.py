@@ -15,13 +15,15 @@ from numpy.typing import NDArray
 
 from executive.planning.plan import AlternativePlan, CompositionConfig, Step
 from executive.planning.planner import Planner, Trajectory
+from executive.planning.stepping import StepPlan, StepPlanner, plan_steps
+from executive.planning.timing import concatenate
 from executive.tasks.base import Task
 from executive.tasks.grasp_geometry import check_grasp
 from executive.tasks.registry import get as task_kind
 from executive.tasks.subtree import build_subtree
 from executive.world.model import World
 
-__all__ = ["build_subtree", "check_grasps", "plan_alternative"]
+__all__ = ["build_subtree", "check_grasps", "plan_alternative", "plan_walk"]
 
 FloatArray = NDArray[np.float64]
 
@@ -46,7 +48,17 @@ def plan_alternative(
     check_grasps(world, steps, planner.config.table_distance, cfg.grip_depth)
     q = np.array(world.home_qpos() if q_start is None else q_start, dtype=float)
     trajectories: dict[str, Trajectory] = {}
+    walks: dict[str, tuple[StepPlan, ...]] = {}
     for step in steps:
+        if step.kind == "step":
+            walk = plan_walk(planner, world, step, q)
+            if walk:
+                walks[step.name] = walk
+                trajectories[step.name] = concatenate(
+                    [p.trajectory for s in walk for p in s.phases], step.name
+                )
+                q = walk[-1].final_qpos
+            continue
         if not step.targets:
             continue
         traj = planner.move(
@@ -59,7 +71,21 @@ def plan_alternative(
         )
         trajectories[step.name] = traj
         q = traj.qpos[-1]
-    return AlternativePlan(alternative, task, tuple(steps), trajectories)
+    return AlternativePlan(alternative, task, tuple(steps), trajectories, walks)
+
+
+def plan_walk(planner: Planner, world: World, step: Step, q: FloatArray) -> tuple[StepPlan, ...]:
+    """The footsteps of a ``step`` step from ``q``: to its ``stance``, ``step.side`` first.
+
+    Raises:
+        StepPlanningError: a step the legs cannot make, or a goal not reached (naming what binds).
+    """
+    if step.stance is None:
+        raise ValueError(f"step '{step.name}' has no stance to walk to")
+    stepper = StepPlanner(world, planner_config=planner.config, problem=planner.problem)
+    x, y, yaw = step.stance
+    goal = (x, y, stepper.pelvis(q)[2] if yaw is None else yaw)
+    return tuple(plan_steps(stepper, q, goal, first=step.side or None))
 
 
 def check_grasps(world: World, steps: list[Step], table_clearance: float, grip_depth: float) -> None:

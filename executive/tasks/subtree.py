@@ -32,20 +32,9 @@ def build_subtree(
     steps of a kind of its own (a press), by step kind.
     """
     from behaviours.gripper import Grasp, Release
-    from behaviours.guard import RiskGuard
     from behaviours.handover import handover_subtree
-    from behaviours.move_hand import Carry, Home, Lift, MoveHand, Place, Retreat
-    from behaviours.push import Push
+    from behaviours.step import Step as FootStep
 
-    movers = {
-        "move": MoveHand,
-        "lift": Lift,
-        "carry": Carry,
-        "place": Place,
-        "retreat": Retreat,
-        "home": Home,
-        "push": Push,
-    }
     children: list[py_trees.behaviour.Behaviour] = []
     steps = list(plan.steps)
     i = 0
@@ -69,31 +58,47 @@ def build_subtree(
             )
             i += 3
             continue
-        if step.kind == "grasp":
+        if step.kind == "step":  # a walk: one behaviour per footstep
+            walk = [FootStep(f"{step.name}.{k + 1}", s) for k, s in enumerate(plan.walks.get(step.name, ()))]
+            children.append(py_trees.composites.Sequence(name=step.name, memory=True, children=walk))
+        elif step.kind == "grasp":
             children.append(Grasp(step.name, step.side, step.obj))
         elif step.kind == "release":
             children.append(Release(step.name, step.side, step.obj))
         else:
-            # After a release the open jaws may still brush the object they let go of.
-            let_go = step.obj or (step.allow_contact[0] if step.allow_contact else "")
-            touching = (step.side, let_go) if step.kind in ("retreat", "home", "push") and let_go else None
-            # The move onto a grasp: the open jaws must straddle the object, not land on it.
-            after = steps[i + 1] if i + 1 < len(steps) else None
-            onto_grasp = after is not None and after.kind == "grasp" and after.side == step.side
-            approaching = (step.side, after.obj) if after is not None and onto_grasp else None
-            mover = movers[step.kind](
-                step.name, plan.trajectories[step.name], touching=touching or None, approaching=approaching
-            )
-            children.append(
-                RiskGuard(
-                    mover,
-                    side=step.side,
-                    kind=step.kind,
-                    obj=plan.task.object,
-                    allow_contact=step.allow_contact,
-                )
-                if guard
-                else mover
-            )
+            children.append(_motion(plan, steps, i, guard))
         i += 1
     return py_trees.composites.Sequence(name=plan.name, memory=True, children=children)
+
+
+def _motion(plan: AlternativePlan, steps: list[Step], i: int, guard: bool) -> py_trees.behaviour.Behaviour:
+    """The mover of motion step ``i`` (wrapped in a live risk guard when ``guard``)."""
+    from behaviours.guard import RiskGuard
+    from behaviours.move_hand import Carry, Home, Lift, MoveHand, Place, Retreat
+    from behaviours.push import Push
+
+    movers = {
+        "move": MoveHand,
+        "lift": Lift,
+        "carry": Carry,
+        "place": Place,
+        "retreat": Retreat,
+        "home": Home,
+        "push": Push,
+    }
+    step = steps[i]
+    # After a release the open jaws may still brush the object they let go of.
+    let_go = step.obj or (step.allow_contact[0] if step.allow_contact else "")
+    touching = (step.side, let_go) if step.kind in ("retreat", "home", "push") and let_go else None
+    # The move onto a grasp: the open jaws must straddle the object, not land on it.
+    after = steps[i + 1] if i + 1 < len(steps) else None
+    onto_grasp = after is not None and after.kind == "grasp" and after.side == step.side
+    approaching = (step.side, after.obj) if after is not None and onto_grasp else None
+    mover = movers[step.kind](
+        step.name, plan.trajectories[step.name], touching=touching or None, approaching=approaching
+    )
+    if not guard:
+        return mover
+    return RiskGuard(
+        mover, side=step.side, kind=step.kind, obj=plan.task.object, allow_contact=step.allow_contact
+    )

@@ -1,0 +1,89 @@
+"""The ``step`` kind: the robot walks to a goal stance in quasi-static steps.
+
+    mission:
+      - step: {to: [0.35, 0.0], yaw: 0}      # where the pelvis should stand (x, y m; yaw deg)
+
+``to``: the pelvis's goal on the floor (x, y, m, world frame); ``yaw``: its heading (degrees,
+default: the heading it has); ``alternatives``: which foot leads, ``left_first`` or
+``right_first`` (default both). Each alternative is a walk of quasi-static steps
+(:mod:`executive.planning.stepping`: weight shift, lift, swing, touchdown, weight shift back),
+each within the robot's measured step reach, planned from where the robot stands; the
+behaviour :class:`behaviours.step.Step` follows each step in physics. Later tasks plan from
+the stance the walk ends in (``moves_base``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from executive.planning.plan import CompositionConfig, Step
+from executive.schema.types import SceneConfig
+from executive.schema.yaml_nodes import Node
+from executive.tasks.base import Alternative, Task, TaskKind, Verdict
+from executive.world.model import World
+
+__all__ = ["STANCE_TOLERANCE", "StepKind", "StepTask"]
+
+#: m: how far the pelvis may end from its goal stance (a walk's steps are placed open loop).
+STANCE_TOLERANCE = 0.05
+#: m: the farthest goal a step task may name from the origin (a walk is at most a few metres).
+TO_MAX = 5.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class StepTask(Task):
+    """Walk so that the pelvis stands at ``stance`` (x, y, m) heading ``yaw_rad`` (None: as it is)."""
+
+    kind = "step"
+    stance: tuple[float, float]
+    yaw_rad: float | None = None
+
+    def label(self) -> str:
+        yaw = "" if self.yaw_rad is None else f", yaw {math.degrees(self.yaw_rad):.0f} deg"
+        return f"step to ({self.stance[0]:.2f}, {self.stance[1]:.2f}){yaw}"
+
+
+class StepKind(TaskKind):
+    """The ``step`` kind: a walk to a goal stance, either foot first."""
+
+    name = "step"
+    alternative_names = ("left_first", "right_first")
+    moves_base = True
+
+    def read(self, node: Node, scene: SceneConfig) -> Task:
+        """``step: {to: [x, y], yaw, alternatives}``; errors name the key path."""
+        node.check_keys(("to",), ("yaw", "alternatives"))
+        x, y = node.get("to").numbers(2, ge=-TO_MAX, le=TO_MAX)
+        yaw_node = node.opt("yaw")
+        yaw = math.radians(yaw_node.number(ge=-180.0, le=180.0)) if yaw_node is not None else None
+        return StepTask(object="", stance=(x, y), yaw_rad=yaw, alternatives=self.read_alternatives(node))
+
+    def offered(self, task: Task, world: World) -> list[Alternative]:
+        """A walk led by each foot the robot has."""
+        feet = tuple(world.profile.feet)
+        return [Alternative(name) for name in self.alternative_names if name.split("_")[0] in feet]
+
+    def steps(self, task: Task, world: World, alternative: str, config: CompositionConfig) -> list[Step]:
+        """One walking step: the planner lays out the footsteps (:func:`plan_alternative`)."""
+        assert isinstance(task, StepTask)
+        lead = alternative.split("_")[0]
+        return [Step("step", f"{alternative}.walk", lead, stance=(*task.stance, task.yaw_rad))]
+
+    def verify(self, task: Task, world: World, detector: object) -> Verdict | None:
+        """The pelvis where the robot now stands, against the goal: event ``stood``, or a failure."""
+        assert isinstance(task, StepTask)
+        robot = getattr(detector, "world", None)
+        if robot is None:
+            return None
+        x, y = (float(v) for v in robot.data.xpos[robot.ids.base_body][:2])
+        error = math.hypot(x - task.stance[0], y - task.stance[1])
+        fields = {"pelvis": [round(x, 4), round(y, 4)], "stance_error_m": round(error, 4)}
+        if error <= STANCE_TOLERANCE:
+            return Verdict(True, "stood", fields)
+        limit = f"tolerance {STANCE_TOLERANCE * 100:.0f} cm"
+        detail = f"the pelvis stands {error * 100:.1f} cm from its goal ({limit})"
+        return Verdict(False, "failure", {**fields, "mode": "tracking", "detail": detail})
+
+    def moved_objects(self, task: Task) -> tuple[str, ...]:
+        return ()
