@@ -75,6 +75,7 @@ class EstimateState:
     qpos: FloatArray
     held: dict[str, str] = field(default_factory=dict)
     grips: dict[str, Grip] = field(default_factory=dict)
+    follows_base: bool = False
 
     @classmethod
     def of(cls, world: World) -> EstimateState:
@@ -83,7 +84,7 @@ class EstimateState:
             name: Grip(g.side, np.array(g.position, dtype=float), np.array(g.quat, dtype=float), g.looks)
             for name, g in world.grips.items()
         }
-        return cls(np.array(world.data.qpos, dtype=float), dict(world.held), grips)
+        return cls(np.array(world.data.qpos, dtype=float), dict(world.held), grips, world.follows_base)
 
     def apply(self, world: World) -> None:
         """Put ``world`` (an estimate of the same scenario) in this state, kinematics included."""
@@ -97,6 +98,7 @@ class EstimateState:
         world.held.update(held)
         world.grips.clear()
         world.grips.update(grips)
+        world.follows_base = self.follows_base
         mujoco.mj_kinematics(world.model, world.data)
 
 

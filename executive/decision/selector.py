@@ -44,7 +44,7 @@ from executive.errors import ExecutiveError
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
 from executive.world.model import World
-from executive.world.observation import refresh
+from executive.world.observation import measured_qpos, refresh
 
 __all__ = ["MAX_WORKER_LOSSES", "RiskSelector", "risk_row", "task_label"]
 
@@ -150,7 +150,7 @@ class RiskSelector(py_trees.composites.Composite):
         """
         robot = self.bb.robot
         objects = {name: self.estimate.object_pose(name) for name in self.estimate.ids.object_bodies}
-        return np.array(robot.data.qpos, dtype=float), objects
+        return measured_qpos(self.estimate, robot), objects
 
     # --- py_trees life cycle --------------------------------------------------------------
 
@@ -244,7 +244,8 @@ class RiskSelector(py_trees.composites.Composite):
         The robot's grasp record (``holding``) loses a hand whose touch no longer holds its object.
         """
         robot = self.bb.robot
-        fields = refresh(self.estimate, robot, dict(self.bb.holding), reason)
+        follow = self.kind.moves_base  # after (part of) a walk the base is measured again
+        fields = refresh(self.estimate, robot, dict(self.bb.holding), reason, follow_base=follow)
         self.bb.holding = dict(fields["holding"])
         self._last_look = robot.time
         self.log.record("observation", task=self.name, **fields)

@@ -358,6 +358,10 @@ class SimulatedRobot:
     def failure(self) -> Failure | None:
         return self.detector.failure
 
+    def observe_base(self) -> tuple[FloatArray, FloatArray]:
+        """Where the robot measures its base (after a walk): the truth with the sensor's odometry noise."""
+        return self.sensor.observe_base()
+
     def observe_objects(self) -> dict[str, tuple[FloatArray, FloatArray]]:
         """One look at the objects: their truth poses with the sensor's noise (:class:`SimulatedSensor`).
 

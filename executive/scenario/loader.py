@@ -287,6 +287,8 @@ def _uncertainty(node: Node) -> Uncertainty:
             "com": ("com", between(0.0, R.COM_SIGMA_MAX)),
             "object_mass": ("object_mass", between(0.0, R.RELATIVE_SIGMA_MAX)),
             "friction": ("friction", between(0.0, R.RELATIVE_SIGMA_MAX)),
+            "base_position": ("base_position", between(0.0, R.POSITION_SIGMA_MAX)),
+            "base_yaw": ("base_yaw_rad", _deg_sigma),
         },
     )
 

@@ -125,7 +125,8 @@ class Uncertainty:
     object_position: m, per horizontal axis; object_yaw_rad: rad;
     obstacle_position: m, per horizontal axis; com: m, per horizontal axis,
     error of the robot's own centre-of-mass estimate; object_mass: relative
-    (0.1 = 10 %); friction: relative.
+    (0.1 = 10 %); friction: relative; base_position (m, per horizontal axis) and base_yaw_rad:
+    the error of the robot's own measure of where its base stands after it walked (odometry).
     """
 
     object_position: float = 0.0  # m, [0, 0.2]
@@ -134,6 +135,8 @@ class Uncertainty:
     com: float = 0.0  # m, [0, 0.1]
     object_mass: float = 0.0  # relative, [0, 1]
     friction: float = 0.0  # relative, [0, 1]
+    base_position: float = 0.0  # m, [0, 0.2]
+    base_yaw_rad: float = 0.0  # [0, 180] deg in YAML
 
 
 @dataclass(frozen=True)

@@ -66,15 +66,18 @@ def check_symmetry(world: World, obj: str, alternative: str) -> None:
 def exchange_point(
     world: World, giver: str, receiver: str, obj: str, end: float, cfg: CompositionConfig
 ) -> Exchange:
-    """The handover pose: object centre at ``handover_point``, lying across the body."""
+    """The handover pose: object centre at ``handover_point`` (from the robot's base as it stood at
+    the start, moved with it after a walk), lying across the body."""
     body = next(b for b in world.scenario.scene.objects if b.name == obj)
     pos, _ = world.object_pose(obj)
     site_above_centre = grasp_height(body, pos[2], cfg) - pos[2]
-    hx, hy = cfg.handover_point
+    h = HandFrames(world)
+    hx, hy = h.to_world(cfg.handover_point)
     centre = np.array([hx, hy, world.scenario.scene.table.height + cfg.handover_height + body.half_height()])
-    side_dir = np.array([0.0, 1.0 if giver == "left" else -1.0, 0.0])
+    side = 1.0 if giver == "left" else -1.0
+    side_dir = np.array([-side * np.sin(h.heading), side * np.cos(h.heading), 0.0])
     # The giver turns it by the shortest way that puts its end on its own side.
-    yaw = float(np.arctan2(end * side_dir[1], 0.0))
+    yaw = float(np.arctan2(end * side_dir[1], end * side_dir[0]))
     d = cfg.handover_offset
     return Exchange(
         giver,

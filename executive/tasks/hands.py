@@ -44,6 +44,9 @@ def yaw_of(quat: FloatArray) -> float:
 class HandFrames:
     """Hand targets in one world: home poses, the body's midline, preferred closing directions.
 
+    The home hand poses are the home keyframe's; once the robot has walked (the estimate
+    ``follows_base``) they, the base and the heading move with the base where it stands now.
+
     Args:
         world: the estimate world (its home keyframe gives the home hand poses and the base).
     """
@@ -53,13 +56,20 @@ class HandFrames:
         data = mujoco.MjData(world.model)
         mujoco.mj_resetDataKeyframe(world.model, data, world.ids.keyframe)
         mujoco.mj_kinematics(world.model, data)
+        mat = data.xmat[world.ids.base_body]
+        start, start_heading = data.xpos[world.ids.base_body].copy(), float(np.arctan2(mat[3], mat[0]))
+        self._moved = _walked(world, start, start_heading)
         self.home = {
-            side: HandTarget(side, data.site_xpos[site].copy(), site_quat(data, site))
+            side: self._moved.target(HandTarget(side, data.site_xpos[site].copy(), site_quat(data, site)))
             for side, site in world.ids.hand_sites.items()
         }
-        mat = data.xmat[world.ids.base_body]
-        self.base = data.xpos[world.ids.base_body].copy()
-        self.heading = float(np.arctan2(mat[3], mat[0]))  # yaw of the base's forward (x) axis
+        self.base = self._moved.point(start)
+        self.heading = start_heading + self._moved.turn  # yaw of the base's forward (x) axis
+
+    def to_world(self, xy: tuple[float, float]) -> tuple[float, float]:
+        """A point of the floor given as if the robot stood at its start (x, y): where it is now."""
+        p = self._moved.point(np.array([xy[0], xy[1], 0.0]))
+        return float(p[0]), float(p[1])
 
     def side_of_body(self, point: FloatArray) -> float:
         """+1 left of the robot's midline, -1 right of it."""
@@ -92,3 +102,38 @@ class HandFrames:
         else:
             closing = self.closing_near_home(side, grasp_yaw) + (hand_yaw - grasp_yaw)
         return HandTarget(side, np.asarray(point, dtype=float), top_down_quat(closing))
+
+
+class _Walked:
+    """The planar motion of the base from its start: a turn ``turn`` (rad) about the start base,
+    then a shift ``shift`` (m, x y)."""
+
+    def __init__(self, start: FloatArray, turn: float, shift: FloatArray) -> None:
+        self.start, self.turn, self.shift = np.asarray(start, dtype=float), float(turn), shift
+        c, s = np.cos(self.turn), np.sin(self.turn)
+        self.rotation = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        self.quat = np.array([np.cos(self.turn / 2), 0.0, 0.0, np.sin(self.turn / 2)])
+
+    def point(self, p: FloatArray) -> FloatArray:
+        """``p`` moved with the base."""
+        out = self.rotation @ (np.asarray(p, dtype=float) - self.start) + self.start
+        out[:2] += self.shift
+        return out
+
+    def target(self, t: HandTarget) -> HandTarget:
+        """A hand target moved with the base."""
+        if self.turn == 0.0 and not np.any(self.shift):
+            return t
+        quat = np.zeros(4)
+        mujoco.mju_mulQuat(quat, self.quat, np.asarray(t.quat, dtype=float))
+        return HandTarget(t.side, self.point(t.position), quat)
+
+
+def _walked(world: World, start: FloatArray, start_heading: float) -> _Walked:
+    """How far the base has walked from its start in ``world`` (none unless it ``follows_base``)."""
+    if not world.follows_base:
+        return _Walked(start, 0.0, np.zeros(2))
+    base = world.data.qpos[world.base_qpos]
+    w, x, y, z = base[3:]
+    heading = float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+    return _Walked(start, heading - start_heading, np.asarray(base[:2], dtype=float) - start[:2])

@@ -164,6 +164,8 @@ class World:
     held: dict[str, str] = field(default_factory=dict)
     #: object name -> how the holding hand holds it (kept with ``held``)
     grips: dict[str, Grip] = field(default_factory=dict)
+    #: the robot's base in ``data`` is where the robot measured it after a walk (else: its start)
+    follows_base: bool = False
 
     def held_by(self, obj: str) -> str | None:
         """The side of the hand that holds ``obj`` (None: no hand holds it).
@@ -180,12 +182,25 @@ class World:
         """Put the world in its home state: the robot's standing keyframe, objects at rest, none held."""
         self.held.clear()
         self.grips.clear()
+        self.follows_base = False
         mujoco.mj_resetDataKeyframe(self.model, self.data, self.ids.keyframe)
         mujoco.mj_forward(self.model, self.data)
 
     @property
     def robot_mass(self) -> float:
         return float(self.model.body_subtreemass[self.ids.base_body])
+
+    @property
+    def base_qpos(self) -> slice:
+        """The robot's floating base in ``qpos`` (position, then quaternion w x y z)."""
+        model = self.model
+        joint = next(
+            j
+            for j in range(model.njnt)
+            if model.jnt_bodyid[j] == self.ids.base_body and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE
+        )
+        adr = int(model.jnt_qposadr[joint])
+        return slice(adr, adr + 7)
 
     @property
     def robot_dof(self) -> int:

@@ -48,8 +48,10 @@ __all__ = [
     "Observation",
     "SimulatedSensor",
     "confirmed_holding",
+    "follow_base_of",
     "holders",
     "look",
+    "measured_qpos",
     "refresh",
     "update_estimate",
 ]
@@ -63,6 +65,8 @@ GRASP_CONTACTS, GRASP_FORCE = 2, 10.0
 #: The simulated sensor's generator is ``default_rng([seed, OBSERVATION_STREAM])``: the run's
 #: truth seed, but a stream independent of the truth's own draw (``default_rng(seed)``).
 OBSERVATION_STREAM = 1
+#: ... and its odometry's (the base after a walk) ``default_rng([seed, ODOMETRY_STREAM])``.
+ODOMETRY_STREAM = 2
 #: Why the estimate is updated: after a task ended, after a failure, before a re-plan, and (a
 #: host's robot) at start-up.
 REASONS = ("after_task", "after_failure", "before_replan", "at_start")
@@ -104,6 +108,9 @@ class SimulatedSensor:
         self.sigma_position = float(truth.scenario.uncertainty.object_position)
         self.sigma_yaw = float(truth.scenario.uncertainty.object_yaw_rad)
         self.rng = np.random.default_rng([self.seed, OBSERVATION_STREAM])
+        self.sigma_base = float(truth.scenario.uncertainty.base_position)
+        self.sigma_base_yaw = float(truth.scenario.uncertainty.base_yaw_rad)
+        self.odometry = np.random.default_rng([self.seed, ODOMETRY_STREAM])
 
     @property
     def source(self) -> dict[str, Any]:
@@ -114,6 +121,16 @@ class SimulatedSensor:
             "sigma_yaw_rad": self.sigma_yaw,
             "seed": self.seed,
         }
+
+    def observe_base(self) -> Pose:
+        """Where the robot measures its base after a walk: the truth with the odometry's noise."""
+        pos = np.array(self.truth.data.qpos[self.truth.base_qpos][:3], dtype=float)
+        quat = np.array(self.truth.data.qpos[self.truth.base_qpos][3:], dtype=float)
+        if self.sigma_base:
+            pos[:2] += self.odometry.normal(0.0, self.sigma_base, 2)
+        if self.sigma_base_yaw:
+            quat = _turn(quat, float(self.odometry.normal(0.0, self.sigma_base_yaw)))
+        return pos, quat
 
     def observe(self) -> dict[str, Pose]:
         """One noisy look at every object of the truth world: name -> (position, quaternion)."""
@@ -295,7 +312,9 @@ def _compose(pos: FloatArray, quat: FloatArray, rel_pos: FloatArray, rel_quat: F
     return pos + out_pos, out_quat / np.linalg.norm(out_quat)
 
 
-def refresh(world: World, robot: Any, holding: Mapping[str, str], reason: str) -> dict[str, Any]:
+def refresh(
+    world: World, robot: Any, holding: Mapping[str, str], reason: str, *, follow_base: bool = False
+) -> dict[str, Any]:
     """Look through ``robot`` and update the estimate ``world``: the fields of the log's line.
 
     Args:
@@ -303,20 +322,50 @@ def refresh(world: World, robot: Any, holding: Mapping[str, str], reason: str) -
         robot: the robot (its measured ``data.qpos`` is in ``world``'s layout).
         holding: the robot's grasp record, side -> object.
         reason: one of :data:`REASONS`.
+        follow_base: the robot walked: the estimate's base goes where the robot measures it
+            (:func:`follow_base`), and the line says where (``base``).
 
     Returns:
         ``reason``, ``source``, ``time``, ``objects`` (the records of :func:`update_estimate`)
         and ``holding`` (the grasp record as touch confirms it, side -> object), for
-        ``AuditLog.record("observation", ...)``.
+        ``AuditLog.record("observation", ...)``; with ``follow_base``, ``base`` too.
     """
     if reason not in REASONS:
         raise ValueError(f"observation reason {reason!r} is not one of {REASONS}")
+    base = follow_base_of(world, robot) if follow_base else None
     seen = look(robot, holding)
-    records = update_estimate(world, np.asarray(robot.data.qpos, dtype=float), seen)
-    return {
+    records = update_estimate(world, measured_qpos(world, robot), seen)
+    fields: dict[str, Any] = {
         "reason": reason,
         "source": seen.source,
         "time": seen.time,
         "objects": records,
         "holding": dict(seen.holding),
     }
+    if base is not None:
+        fields["base"] = base
+    return fields
+
+
+def follow_base_of(world: World, robot: Any) -> dict[str, Any]:
+    """Put the estimate's robot base where ``robot`` measures it (its ``observe_base()``, odometry
+    with the scenario's ``uncertainty.base_position``/``base_yaw``; else its ``data.qpos``): the
+    log's record of it (position, yaw)."""
+    measure = getattr(robot, "observe_base", None)
+    if callable(measure):
+        pos, quat = measure()
+    else:
+        q = np.asarray(robot.data.qpos, dtype=float)[world.base_qpos]
+        pos, quat = q[:3], q[3:]
+    world.data.qpos[world.base_qpos] = np.concatenate([pos, np.asarray(quat) / np.linalg.norm(quat)])
+    world.follows_base = True
+    mujoco.mj_kinematics(world.model, world.data)
+    return {"position": [float(v) for v in pos], "yaw": _yaw(np.asarray(quat, dtype=float))}
+
+
+def measured_qpos(world: World, robot: Any) -> FloatArray:
+    """The robot's measured joints, its base where the estimate has it once it follows the base."""
+    q = np.array(robot.data.qpos, dtype=float)
+    if world.follows_base:
+        q[world.base_qpos] = world.data.qpos[world.base_qpos]
+    return q
