@@ -8,12 +8,16 @@ paragraph on stderr, never a traceback.
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 import warnings
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
+
+import numpy as np
+from numpy.typing import NDArray
 
 from executive.cli import replay as replay_command
 from executive.cli import tree as tree_command
@@ -22,7 +26,7 @@ from executive.console import PORT
 from executive.errors import ExecutiveError
 from executive.schema import catalog as registry
 from executive.schema.failure_modes import ScenarioDeprecationWarning
-from executive.schema.types import Scenario
+from executive.schema.types import Scenario, Task
 from executive.tasks.registry import ALLOW_ENV, allowing_modules
 from executive.world.model import World, build
 
@@ -32,6 +36,8 @@ if TYPE_CHECKING:
     from executive.report.render import VideoRecorder
 
 __all__ = ["main"]
+
+FloatArray = NDArray[np.float64]
 
 EXIT_OK = 0
 EXIT_FAILED = 1
@@ -89,7 +95,13 @@ def summary(scenario: Scenario, world: World) -> str:
     lines.append(
         f"uncertainty object {u.object_position * 1000:.0f} mm, "
         f"obstacle {u.obstacle_position * 1000:.0f} mm, "
-        f"CoM {u.com * 1000:.0f} mm (1-sigma); risk threshold {scenario.risk.threshold}; "
+        f"CoM {u.com * 1000:.0f} mm"
+        + (
+            f", base {u.base_position * 1000:.0f} mm {math.degrees(u.base_yaw_rad):.1f} deg"
+            if u.base_position or u.base_yaw_rad
+            else ""
+        )
+        + f" (1-sigma); risk threshold {scenario.risk.threshold}; "
         f"approval {scenario.approval.mode}"
     )
     return "\n".join(lines)
@@ -262,21 +274,45 @@ def _cmd_plan(args: argparse.Namespace) -> int:
     tasks = []
     physics = PhysicsCheck(scenario.risk.rollouts.jobs)
     physics.pool.warm()  # the workers start while the planner works
+    q_start: FloatArray | None = None  # home; after a walk, where the chosen walk ends
     try:
         for i, task in enumerate(scenario.mission):
             label = f"{i}: {task.label()}"
-            analytic = assess_task(world, task)
+            analytic = assess_task(world, task, q_start=q_start)
             if not args.json:  # the analytic answer at once, the physics check's after it
                 print(risk_table(scenario, f"{label}, analytic", analytic))
                 print(_checking_text(scenario, analytic), flush=True)
-            alternatives, _ = physics.check(world, analytic)
+            alternatives, _ = physics.check(world, analytic, q_start=q_start)
             tasks.append((label, alternatives))
+            q_start = _stance_after(scenario, world, task, alternatives, q_start)
             _print_plan(args, scenario, world, i, label, alternatives)
     finally:
         physics.close()
     if args.json:
         print(risk_json(scenario, tasks))
     return EXIT_OK
+
+
+def _stance_after(
+    scenario: Scenario,
+    world: World,
+    task: Task,
+    alternatives: list[AlternativeRisk],
+    q_start: FloatArray | None,
+) -> FloatArray | None:
+    """After a task that walks (its kind ``moves_base``), the start of the next: where the chosen
+    walk ends, the estimate's base put there; else ``q_start`` as it was."""
+    from executive.report.plots import chosen_index
+    from executive.tasks.registry import get as task_kind
+
+    chosen = chosen_index(alternatives, scenario.risk.ordering)
+    plan = alternatives[chosen].plan if chosen is not None else None
+    if not task_kind(task.kind).moves_base or plan is None:
+        return q_start
+    end = plan.ordered_trajectories()[-1].qpos[-1].copy()
+    world.data.qpos[world.base_qpos] = end[world.base_qpos]
+    world.follows_base = True
+    return end
 
 
 def _checking_text(scenario: Scenario, analytic: list[AlternativeRisk]) -> str:
