@@ -89,7 +89,11 @@ def _end_now(signum: int, frame: object) -> None:
     """The worker's SIGTERM (and SIGHUP): kill its rollout processes, then leave by the normal
     exit (``SystemExit``), which closes the pool and releases its semaphores; a kill would leave
     them to the resource tracker, which warns of them as leaked."""
-    for child in multiprocessing.active_children():
+    try:
+        children = multiprocessing.active_children()
+    except RuntimeError:  # the list changed under this handler: the pool then waits for their jobs
+        children = []
+    for child in children:
         child.kill()
     raise SystemExit(0)
 
