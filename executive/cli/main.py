@@ -1,8 +1,9 @@
 """The ``executive`` command.
 
-Exit codes: 0 done, 1 a mission/run failed, 2 bad input (a malformed scenario,
-an unknown name, a model that does not compile). Errors are one readable
-paragraph on stderr, never a traceback.
+Exit codes: 0 done, 1 a mission/run failed or was stopped (Ctrl-C, SIGTERM, SIGHUP:
+a safe stop, :mod:`executive.cli.signals`), 2 bad input (a malformed scenario,
+an unknown name, a model that does not compile, more --jobs than the machine holds).
+Errors are one readable paragraph on stderr, never a traceback.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from numpy.typing import NDArray
 from executive.cli import replay as replay_command
 from executive.cli import tree as tree_command
 from executive.cli.output_paths import check_file, check_folder
+from executive.cli.signals import interrupted_text, interrupts_held, stop_reason, stop_signals_as_interrupt
 from executive.console import PORT
 from executive.errors import ExecutiveError
 from executive.schema import catalog as registry
@@ -165,18 +167,23 @@ def _run_mission(scenario: Scenario, args: argparse.Namespace) -> int:
     truth: str | int | None = "exact" if args.exact else args.seed
     console = _open_console(args, scenario.name)
     approval = console.approval(args.approve) if console is not None else args.approve
-    try:
-        executive = Executive(scenario, approval=approval, truth=truth, out=folder, guard=not args.no_guard)
-    except BaseException:
-        if console is not None:
-            console.close()
-        raise
-    if console is not None:
-        console.attach(executive)
-    freeze_startup_heap()  # no full garbage collection pause in the middle of a motion (its doc)
-    display = MissionDisplay(executive, sys.stdout)
     recorder = viewer = None
+    with interrupts_held() as held:  # a stop signal while it is built stops it once built (the try)
+        try:
+            executive = Executive(
+                scenario, approval=approval, truth=truth, out=folder, guard=not args.no_guard
+            )
+        except BaseException:
+            if console is not None:
+                console.close()
+            raise
+        if console is not None:
+            console.attach(executive)
+        freeze_startup_heap()  # no full garbage collection pause in the middle of a motion (its doc)
+        display = MissionDisplay(executive, sys.stdout)
     try:
+        if held:
+            raise held[0]
         if args.video:
             from executive.report.render import VideoRecorder
 
@@ -197,8 +204,9 @@ def _run_mission(scenario: Scenario, args: argparse.Namespace) -> int:
                 viewer.sync()
             if console is not None:
                 console.pace(executive)
-    except KeyboardInterrupt:
-        executive.stop("interrupted by the operator (Ctrl-C): tree halted, robot holding")
+    except KeyboardInterrupt as interrupt:  # Ctrl-C, SIGTERM or SIGHUP (executive.cli.signals)
+        reason, by = stop_reason(interrupt)
+        executive.stop(reason, by=by)
     finally:
         if not executive.done:  # an unexpected error: still leave the robot holding and the log closed
             executive.stop("stopped by an error")
@@ -349,6 +357,7 @@ def _print_plan(
 def _cmd_campaign(args: argparse.Namespace) -> int:
     from executive.validation.campaign import run_campaign, table_text
 
+    _check_jobs(args)
     _check_out(args)
     scenario = _load(args.scenario)
     alternatives = [a.strip() for a in args.alternatives.split(",")] if args.alternatives else None
@@ -382,9 +391,20 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
     return EXIT_OK
 
 
+def _check_jobs(args: argparse.Namespace) -> None:
+    """``--jobs`` no more than this machine holds (an ExecutiveError naming the limit, exit 2;
+    :mod:`executive.validation.worker_limit`). A Ray cluster at ``RAY_ADDRESS`` is not checked."""
+    from executive.validation.worker_limit import check_jobs
+
+    if getattr(args, "backend", "local") == "ray" and os.environ.get("RAY_ADDRESS"):
+        return
+    check_jobs(args.jobs)
+
+
 def _cmd_fidelity(args: argparse.Namespace) -> int:
     from executive.validation.fidelity import run_fidelity, table_text
 
+    _check_jobs(args)
     _check_out(args)
     scenario = _load(args.scenario)
     result = run_fidelity(
@@ -437,6 +457,7 @@ _ROLLOUTS = _whole_number(0, 10_000, "rollouts per alternative; 0: off")
 _TRIALS = _whole_number(1, 1_000_000, "trials")
 _JOBS = _whole_number(1, 1024, "worker processes")
 _TASK = _whole_number(0, 10_000, "a task index, 0 for the first")
+_JOBS_LIMIT = "at most the usable cores, and the available memory over ~300 MB"
 
 
 _SCENARIO_HELP = "a scenario file path, or the name of a bundled scenario (see `executive list`)"
@@ -543,7 +564,9 @@ def _add_campaign(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument(
         "--trials", type=_TRIALS, default=None, help="trials per alternative (default: trials.count)"
     )
-    p.add_argument("--jobs", type=_JOBS, default=1, help="parallel worker processes (default 1)")
+    p.add_argument(
+        "--jobs", type=_JOBS, default=1, help=f"parallel worker processes (default 1; {_JOBS_LIMIT})"
+    )
     p.add_argument("--out", metavar="DIR", help="run folder (default runs/<timestamp>-<scenario>-campaign)")
     p.add_argument("--resume", action="store_true", help="complete the campaign in --out DIR")
     p.add_argument(
@@ -568,7 +591,12 @@ def _add_fidelity(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("scenario", help=_SCENARIO_HELP)
     p.add_argument("--variants", type=int, default=10, help="number of scene variants K (default 10)")
     p.add_argument("--trials", type=int, default=10, help="trials per alternative and variant (default 10)")
-    p.add_argument("--jobs", type=_JOBS, default=1, help="parallel worker processes per campaign (default 1)")
+    p.add_argument(
+        "--jobs",
+        type=_JOBS,
+        default=1,
+        help=f"parallel worker processes per campaign (default 1; {_JOBS_LIMIT})",
+    )
     p.add_argument("--out", metavar="DIR", help="suite folder (default runs/<timestamp>-<scenario>-fidelity)")
     p.add_argument("--seed", type=_SEED, default=None, help="seed of the variants (default: trials.seed)")
     p.add_argument(
@@ -609,7 +637,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     warnings.showwarning = _show_scenario_warning(args.command)
     func: Callable[[argparse.Namespace], int] = args.func
     try:
-        with allowing_modules(getattr(args, "allow_module", ())):
+        with stop_signals_as_interrupt(), allowing_modules(getattr(args, "allow_module", ())):
             return func(args)
     except ExecutiveError as exc:
         print(f"executive {args.command}: error: {exc}", file=sys.stderr)
@@ -620,8 +648,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:  # a path the checks could not foresee (a disk filled, a folder removed)
         print(f"executive {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
-    except KeyboardInterrupt:
-        print(f"executive {args.command}: interrupted", file=sys.stderr)
+    except KeyboardInterrupt as interrupt:  # Ctrl-C, SIGTERM or SIGHUP: exit 1 all three
+        print(f"executive {args.command}: {interrupted_text(interrupt)}", file=sys.stderr)
         return EXIT_FAILED
 
 

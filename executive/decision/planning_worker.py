@@ -35,7 +35,17 @@ if TYPE_CHECKING:
     from executive.decision.planning_job import PlanningJob, PlanningResult
     from executive.schema.types import Scenario
 
-__all__ = ["BEAT_S", "HANG_S", "JOB_S", "KEEP_IDLE", "NICE", "START_S", "PlanningWorker", "WorkerLost"]
+__all__ = [
+    "BEAT_S",
+    "END_S",
+    "HANG_S",
+    "JOB_S",
+    "KEEP_IDLE",
+    "NICE",
+    "START_S",
+    "PlanningWorker",
+    "WorkerLost",
+]
 
 #: The worker's heartbeat period (s).
 BEAT_S = 0.1
@@ -52,6 +62,8 @@ NICE = 10
 _SAMPLE_S = 0.2
 #: Idle workers a process keeps warm for its next executives (0: close them).
 KEEP_IDLE = 2
+#: How long (s) a worker told to end at once (SIGTERM) has to do so before it is killed.
+END_S = 10.0
 
 
 class WorkerLost(ExecutiveError):
@@ -73,6 +85,19 @@ def _beat(beat: Any, parent: int, stop: threading.Event) -> None:
             return
 
 
+def _end_now(signum: int, frame: object) -> None:
+    """The worker's SIGTERM (and SIGHUP): kill its rollout processes, then leave by the normal
+    exit (``SystemExit``), which closes the pool and releases its semaphores; a kill would leave
+    them to the resource tracker, which warns of them as leaked."""
+    try:
+        children = multiprocessing.active_children()
+    except RuntimeError:  # the list changed under this handler: the pool then waits for their jobs
+        children = []
+    for child in children:
+        child.kill()
+    raise SystemExit(0)
+
+
 def _serve(
     conn: multiprocessing.connection.Connection,
     beat: Any,
@@ -86,6 +111,11 @@ def _serve(
     threading.Thread(target=_beat, args=(beat, parent, stop), name="heartbeat", daemon=True).start()
     # Ctrl-C reaches the whole foreground process group: the ticking process stops the worker.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # SIGTERM: the ticking process ends a busy worker (_Instance.end); SIGHUP, a hung-up terminal's
+    # group, too, unless ignored (nohup).
+    signal.signal(signal.SIGTERM, _end_now)
+    if signal.getsignal(signal.SIGHUP) is signal.SIG_DFL:
+        signal.signal(signal.SIGHUP, _end_now)
     os.environ.setdefault("MUJOCO_GL", "egl")
     if nice:
         os.nice(nice)
@@ -166,13 +196,26 @@ class _Instance:
         self.conn.send(("scenario", self.generation, scenario))
 
     def stop(self) -> None:
-        """Tell the worker to stop (it ends its rollout processes); kill it if it is busy or starting."""
+        """Tell the worker to stop (it ends its rollout processes); end it at once if it is busy
+        or starting."""
         if self.unanswered or not self.ready:  # busy (or still building): nothing to wait for
-            self.process.kill()
+            self.end()
             return
         try:
             self.conn.send(None)
         except (BrokenPipeError, OSError):
+            self.end()
+
+    def end(self, grace_s: float = END_S) -> None:
+        """End the worker now: SIGTERM (it kills its rollout processes and exits, releasing what
+        it holds), then SIGKILL if it is still there after ``grace_s``. Returns at once."""
+        self.process.terminate()
+        killer = threading.Timer(grace_s, self._kill_if_running)
+        killer.daemon = True
+        killer.start()
+
+    def _kill_if_running(self) -> None:
+        if self.process.exitcode is None:
             self.process.kill()
 
     def fault(self, now: float, hang_s: float, job_s: float) -> str | None:

@@ -74,32 +74,44 @@ def freeze_startup_heap() -> int:
     return gc.get_freeze_count()
 
 
-@contextlib.contextmanager
-def _sigint_deferred() -> Iterator[None]:
-    """Hold Ctrl-C (SIGINT) off while the run's last records are written.
+#: Signals a host may turn into ``KeyboardInterrupt`` (``executive run`` turns SIGTERM and SIGHUP
+#: into it, :mod:`executive.cli.signals`): held off while a stop is written.
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
 
-    A second Ctrl-C during :meth:`Executive.stop` would otherwise cut the ``end`` line or
-    ``summary.json``; it is noted on stderr and otherwise ignored (the run is ending
-    anyway). Only the main thread can set signal handlers; elsewhere this does nothing.
+
+@contextlib.contextmanager
+def _stop_signals_deferred() -> Iterator[None]:
+    """Hold Ctrl-C (SIGINT), and SIGTERM and SIGHUP where a handler of the host's catches them,
+    off while the run's last records are written.
+
+    A second Ctrl-C (or SIGTERM) during :meth:`Executive.stop` would otherwise cut the ``end``
+    line or ``summary.json``; it is noted on stderr and otherwise ignored (the run is ending
+    anyway). A signal left at its default action (it ends the process) or ignored is left so.
+    Only the main thread can set signal handlers; elsewhere this does nothing.
     """
     if threading.current_thread() is not threading.main_thread():
         yield
         return
 
     def note(signum: int, frame: object) -> None:
+        again = "Ctrl-C" if signum == signal.SIGINT else signal.Signals(signum).name
         sys.stderr.write(
-            "\n(Ctrl-C again: the run is already stopping; its log and summary are being written)\n"
+            f"\n({again} again: the run is already stopping; its log and summary are being written)\n"
         )
 
+    previous: dict[signal.Signals, Any] = {}
     try:
-        previous = signal.signal(signal.SIGINT, note)
+        for signum in _STOP_SIGNALS:
+            handler = signal.getsignal(signum)
+            if handler is not None and (signum == signal.SIGINT or callable(handler)):
+                previous[signum] = signal.signal(signum, note)
     except ValueError:  # no signals here (an embedded interpreter)
-        yield
-        return
+        pass
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for held, handler in previous.items():
+            signal.signal(held, handler)
 
 
 def _load(scenario: Scenario | str | Path) -> Scenario:
@@ -343,19 +355,28 @@ class Executive:
                 self.stop(f"time limit {time_limit_s:.0f} s reached")
         return self.summary()
 
-    def stop(self, reason: str) -> None:
+    def stop(self, reason: str, *, by: str | None = None) -> None:
         """Halt the tree, hold the robot, answer nothing more, close the log (outcome aborted).
 
-        A request still waiting for approval is answered ``abort`` first, and that answer is
-        logged before the ``stop`` line: by ``operator:interrupt`` when called while a
-        ``KeyboardInterrupt`` is being handled (Ctrl-C), else by ``halt``. A second Ctrl-C
-        meanwhile is held off until the summary and the ``end`` line are written.
+        Safe to call from the main thread at any moment, a ``KeyboardInterrupt`` handler
+        included (what a host does on Ctrl-C or SIGTERM: docs/embedding.md); a second call
+        does nothing. The planning worker and its rollout processes are ended.
+
+        Args:
+            reason: why, in words (the ``stop`` line and ``summary.json``'s ``reason``).
+            by: who answers ``abort`` to a request still waiting for approval (logged before
+                the ``stop`` line). Default: ``operator:interrupt`` when called while a
+                ``KeyboardInterrupt`` is being handled (Ctrl-C), else ``halt``.
+
+        A second Ctrl-C (or a SIGTERM or SIGHUP the host turns into one) meanwhile is held off
+        until the summary and the ``end`` line are written.
         """
         if self.done:
             return
-        interrupted = isinstance(sys.exc_info()[1], KeyboardInterrupt)
-        with _sigint_deferred():
-            self._answer_pending("operator:interrupt" if interrupted else "halt", reason)
+        if by is None:
+            by = "operator:interrupt" if isinstance(sys.exc_info()[1], KeyboardInterrupt) else "halt"
+        with _stop_signals_deferred():
+            self._answer_pending(by, reason)
             self.tree.interrupt()
             self.robot.hold()
             self.log.record("stop", reason=reason, time=self.robot.time)
@@ -389,7 +410,7 @@ class Executive:
 
         The summary comes first, so a run killed just after its ``end`` line has it whole.
         """
-        with _sigint_deferred():
+        with _stop_signals_deferred():
             self.outcome = outcome
             self.wall_s = time.perf_counter() - self.started_wall
             summary = self.summary()
