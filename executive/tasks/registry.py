@@ -127,7 +127,15 @@ def allowed_modules(extra: Iterable[str] = ()) -> frozenset[str]:
 @contextmanager
 def allowing_modules(modules: Iterable[str]) -> Iterator[None]:
     """Allow ``modules`` (besides those already allowed) while the block runs, in this process
-    and the worker processes it starts (through :data:`ALLOW_ENV`); restored afterwards."""
+    and the worker processes it starts (through :data:`ALLOW_ENV`); restored afterwards.
+
+    Raises:
+        TaskKindError: a name that is no module name (dotted Python identifiers).
+    """
+    modules = list(modules)
+    for name in modules:
+        if not all(part.isidentifier() for part in name.strip().split(".")):
+            raise TaskKindError(f"--allow-module {name!r}: not a module name (dotted Python identifiers)")
     before = os.environ.get(ALLOW_ENV)
     added = allowed_modules(modules)
     if added:

@@ -57,7 +57,12 @@ class StepKind(TaskKind):
         x, y = node.get("to").numbers(2, ge=-TO_MAX, le=TO_MAX)
         yaw_node = node.opt("yaw")
         yaw = math.radians(yaw_node.number(ge=-180.0, le=180.0)) if yaw_node is not None else None
-        return StepTask(object="", stance=(x, y), yaw_rad=yaw, alternatives=self.read_alternatives(node))
+        return StepTask(
+            object="",
+            stance=(x, y),
+            yaw_rad=yaw,
+            alternatives=self.read_alternatives(node, self.alternative_names),
+        )
 
     def offered(self, task: Task, world: World) -> list[Alternative]:
         """A walk led by each foot the robot has."""

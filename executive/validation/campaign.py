@@ -178,6 +178,10 @@ def _check_request(
         raise ExecutiveError(f"{scenario.name} has {len(scenario.mission)} task(s); no task {task_index}")
     task = scenario.mission[task_index]
     names = list(alternatives) if alternatives else list(task.alternatives)
+    if not names:
+        raise ExecutiveError(
+            f"task {task_index} of {scenario.name} ({task.label()}) names no alternative to run"
+        )
     unknown = [a for a in names if a not in task.alternatives]
     if unknown:
         raise ExecutiveError(
