@@ -51,9 +51,8 @@ def plan_alternative(
     walks: dict[str, tuple[StepPlan, ...]] = {}
     for step in steps:
         if step.kind == "step":
-            walk = plan_walk(planner, world, step, q)
-            if walk:
-                walks[step.name] = walk
+            walk = walks[step.name] = plan_walk(planner, world, step, q)
+            if walk:  # none: the feet stand at the goal already
                 trajectories[step.name] = concatenate(
                     [p.trajectory for s in walk for p in s.phases], step.name
                 )

@@ -58,8 +58,8 @@ def build_subtree(
             )
             i += 3
             continue
-        if step.kind == "step":  # a walk: one behaviour per footstep
-            walk = [FootStep(f"{step.name}.{k + 1}", s) for k, s in enumerate(plan.walks.get(step.name, ()))]
+        if step.kind == "step":  # a walk: one behaviour per footstep (KeyError: not planned)
+            walk = [FootStep(f"{step.name}.{k + 1}", s) for k, s in enumerate(plan.walks[step.name])]
             children.append(py_trees.composites.Sequence(name=step.name, memory=True, children=walk))
         elif step.kind == "grasp":
             children.append(Grasp(step.name, step.side, step.obj))
