@@ -7,7 +7,7 @@ feet (:meth:`executive.execution.simulated.JointTargetController.leg_loads` with
 stance leg carries the whole body while the other swings), with the robot's ankle balance
 feedback on those feet while the step runs
 (:meth:`executive.execution.simulated.SimulatedRobot.set_balance`: the measured capture point held
-on the target's, which robots with soft leg servos need to stand on one foot), and checks what the
+on the plan's, which robots with soft leg servos need to stand on one foot), and checks what the
 feet really do:
 
 * after ``lift``: the swing foot's measured contact force with the floor has left it (liftoff);
@@ -73,11 +73,19 @@ def foothold(robot: Any, side: str) -> Foothold:
     return Foothold(side, float(data.xpos[body][0]), float(data.xpos[body][1]), yaw)
 
 
+def _com_at(phase: StepPhase, times: np.ndarray) -> np.ndarray:
+    """The phase's planned CoM (world xyz) at each of ``times`` (clamped to the phase)."""
+    trajectory = phase.trajectory
+    t = np.clip(times, 0.0, trajectory.duration)
+    return np.stack([np.interp(t, trajectory.times, trajectory.com_path[:, k]) for k in range(3)], axis=1)
+
+
 class Step(RobotBehaviour):
     """Follow a step's phases in physics, one control period per tick (never blocks).
 
     Each tick sets the phase's target and, on a robot that has it (``set_balance``), the ankle
-    balance feedback on the phase's support feet; the step's end switches the feedback off.
+    balance feedback on the phase's support feet with the phase's planned CoM; the step's end
+    switches the feedback off.
     Succeeds when the last phase has played and the swing foot carries its share of the body.
     Fails at once when a physics detector flags a failure (a fall); with ``tracking`` when the
     swing foot still carries more than ``liftoff_force`` (N) after the lift, is more than
@@ -135,6 +143,7 @@ class Step(RobotBehaviour):
         self._ahead_t = np.zeros(0)
         self._ahead_q = np.zeros((0, 0))
         self._ahead_load: np.ndarray | None = None
+        self._ahead_com = np.zeros((0, 3))
         self._ahead_i = 0
         self._balance: Any = None
 
@@ -239,6 +248,7 @@ class Step(RobotBehaviour):
             times = t + dt * np.arange(self.chunk + 1, dtype=np.float64)
             self._ahead_t = times[:-1]
             self._ahead_q = phase.trajectory.sample_many(times)
+            self._ahead_com = _com_at(phase, times)
             leg_loads = getattr(getattr(self._robot, "controller", None), "leg_loads", None)
             support = [phase.support] * self.chunk
             self._ahead_load = leg_loads(self._ahead_q[:-1], support) if leg_loads is not None else None
@@ -251,7 +261,8 @@ class Step(RobotBehaviour):
         else:
             self._robot.set_joint_targets(q, qvel)
         if self._balance is not None:
-            self._balance(phase.support)
+            com = self._ahead_com[i]
+            self._balance(phase.support, com=com, com_velocity=(self._ahead_com[i + 1] - com)[:2] / dt)
 
     def _watch_com(self, stance: str) -> None:
         """Keep the least margin of the truth CoM inside the stance sole's footprint."""

@@ -240,7 +240,7 @@ def test_the_g1_falls_without_the_balance_feedback(g1_mjcf: Path, monkeypatch: p
     q = world.home_qpos()
     start = planner.footholds(q)["right"]
     plan = planner.plan_step(q, "right", Foothold("right", start.x + 0.10, start.y, start.yaw))
-    monkeypatch.setattr(SimulatedRobot, "set_balance", lambda self, support: None)
+    monkeypatch.setattr(SimulatedRobot, "set_balance", lambda self, *args, **kwargs: None)
     robot = SimulatedRobot(build(loads(scene, source="g1.yaml")))
     install(robot)
     step = Step("step", plan)
@@ -256,16 +256,17 @@ def test_the_g1_falls_without_the_balance_feedback(g1_mjcf: Path, monkeypatch: p
 def test_the_balance_feedback_is_opt_in(humanoid: tuple[World, StepPlanner]) -> None:
     """Off (the default, and after a hold) the servos run exactly as without it."""
     world, _ = humanoid
+    com = world.data.subtree_com[world.ids.base_body].copy()
     runs = []
     for mode in ("never", "off", "held"):
         robot = SimulatedRobot(build(loads(_floor(), source="step_floor.yaml")))
         if mode == "off":
-            robot.set_balance(("left",))
+            robot.set_balance(("left",), com=com)
             robot.set_balance(None)
         elif mode == "held":
-            robot.set_balance(("left", "right"))
+            robot.set_balance(("left", "right"), com=com, com_velocity=(0.0, 0.0))
             robot.hold()
-        assert robot.balance_support is None
+        assert robot.balance is None
         robot.set_joint_targets(world.home_qpos())
         for _ in range(10):
             robot.advance()
@@ -273,7 +274,9 @@ def test_the_balance_feedback_is_opt_in(humanoid: tuple[World, StepPlanner]) -> 
     assert np.array_equal(runs[0], runs[1]) and np.array_equal(runs[0], runs[2])
     for bad in (["middle"], [], ["left", "right", "left"]):
         with pytest.raises(ValueError):
-            robot.set_balance(bad)
+            robot.set_balance(bad, com=com)
+    with pytest.raises(ValueError):
+        robot.set_balance(["left"])  # no planned CoM
 
 
 def test_a_foot_off_its_foothold_fails_with_tracking(humanoid: tuple[World, StepPlanner]) -> None:

@@ -18,7 +18,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
-from executive.execution.balance import AnkleBalance
+from executive.execution.balance import AnkleBalance, BalanceTarget
 from executive.monitoring.detectors import Failure, FailureDetector
 from executive.world.model import World
 from executive.world.observation import SimulatedSensor
@@ -353,8 +353,8 @@ class SimulatedRobot:
             self._gripper_idx[side] = ids
             self.gripper_ctrl[side] = self.data.ctrl[ids].copy()
         self.stats = StepStats()
-        self.balance_support: tuple[str, ...] | None = None
-        self._balance: AnkleBalance | None = None
+        self.balance: BalanceTarget | None = None  # the ankle balance feedback's; None: off
+        self._balancer: AnkleBalance | None = None
 
     @property
     def time(self) -> float:
@@ -403,27 +403,38 @@ class SimulatedRobot:
         self.q_target = q
         self.qvel_target = np.zeros(self.model.nq) if qvel_target is None else np.asarray(qvel_target, float)
 
-    def set_balance(self, support: Sequence[str] | None) -> None:
+    def set_balance(
+        self,
+        support: Sequence[str] | None,
+        com: Sequence[float] | None = None,
+        com_velocity: Sequence[float] | None = None,
+    ) -> None:
         """Switch the ankle balance feedback (:class:`AnkleBalance`) on the ``support`` feet, or off.
 
         While on, every control period moves the support feet's ankle servo targets so that the
-        measured capture point follows the current target's (the CoP under the feet shifts to
-        drive the error back); a stepping behaviour switches it on for a step's phases and off
-        when it ends. Off (None, the default, and after :meth:`hold`): the plain servos.
+        measured capture point follows the planned one (the CoP under the feet shifts to drive
+        the error back); a stepping behaviour sets it each tick with its plan's CoM and switches
+        it off when the step ends. Off (None, the default, and after :meth:`hold`): the plain
+        servos, exactly as without it.
 
         Args:
-            support: the feet on the floor (one or two sides of ``profile.feet``), or None.
+            support: the feet on the floor (one or two sides of ``profile.feet``), or None: off.
+            com: the planned whole-robot CoM now (world x, y, z; m); needed with ``support``.
+            com_velocity: its planned rate (world x, y; m/s; None: at rest).
 
         Raises:
-            ValueError: when ``support`` names no foot, more than two, or an unknown one.
+            ValueError: when ``support`` names no foot, more than two, or an unknown one, or
+                ``com`` is missing or not a point.
         """
         if support is None:
-            self.balance_support = None
+            self.balance = None
             return
-        if self._balance is None:
+        if com is None:
+            raise ValueError("the balance feedback needs the planned CoM (com=)")
+        if self._balancer is None:
             c = self.controller
-            self._balance = AnkleBalance(self.world, c.actuators, c.kp)
-        self.balance_support = self._balance.check(support)
+            self._balancer = AnkleBalance(self.world, c.actuators, c.kp)
+        self.balance = self._balancer.target(support, com, com_velocity)
 
     def set_gripper(self, side: str, closed: bool) -> None:
         grip = self.world.profile.arms[side].gripper
@@ -436,7 +447,7 @@ class SimulatedRobot:
 
     def hold(self) -> None:
         """Safe hold: servo every joint to where it is now (the balance feedback off)."""
-        self.balance_support = None
+        self.balance = None
         self.q_target = self.data.qpos.copy()
         self.qvel_target = np.zeros(self.model.nq)
         self._leg_load = self.controller.leg_load(self.q_target)
@@ -464,8 +475,8 @@ class SimulatedRobot:
             model.opt.timestep,
             data,
         )
-        if self.balance_support is not None and self._balance is not None:
-            self._add_balance(servo, moving)
+        if self.balance is not None and self._balancer is not None:
+            self._add_balance(servo, self._balancer.offsets(data, self.q_target, self.balance))
         ctrl = data.ctrl
         for side, values in self.gripper_ctrl.items():  # fixed over the period
             ctrl[self._gripper_idx[side]] = values
@@ -485,15 +496,7 @@ class SimulatedRobot:
         self.stats.physics_wall_s += time.perf_counter() - start
         return self.detector.failure
 
-    def _add_balance(self, servo: ServoPeriod, moving: bool) -> None:
-        """Add the ankle balance offsets of this period's start to its servo targets."""
-        assert self._balance is not None and self.balance_support is not None
-        offsets = self._balance.offsets(
-            self.data,
-            self.q_target,
-            self.qvel_target if moving else None,
-            self.control_dt,
-            self.balance_support,
-        )
+    def _add_balance(self, servo: ServoPeriod, offsets: FloatArray) -> None:
+        """Add the ankle balance offsets (of this period's start) to every step's servo targets."""
         c = self.controller
         servo.ctrl = np.clip(servo.ctrl + offsets, c.ctrl_low, c.ctrl_high)
