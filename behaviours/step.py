@@ -86,6 +86,7 @@ class Step(RobotBehaviour):
     Each tick sets the phase's target and, on a robot that has it (``set_balance``), the ankle
     balance feedback on the phase's support feet with the phase's planned CoM; the step's end
     switches the feedback off.
+
     Succeeds when the last phase has played and the swing foot carries its share of the body.
     Fails at once when a physics detector flags a failure (a fall); with ``tracking`` when the
     swing foot still carries more than ``liftoff_force`` (N) after the lift, is more than
