@@ -4,7 +4,11 @@ A step's plan (:class:`executive.planning.stepping.StepPlan`) is five phases, ea
 trajectory with the feet on the floor during it (``support``). :class:`Step` follows them one
 after the other, feeding the leg servos the static load of each target on the phase's support
 feet (:meth:`executive.execution.simulated.JointTargetController.leg_loads` with ``stance``: the
-stance leg carries the whole body while the other swings), and checks what the feet really do:
+stance leg carries the whole body while the other swings), with the robot's ankle balance
+feedback on those feet while the step runs
+(:meth:`executive.execution.simulated.SimulatedRobot.set_balance`: the measured capture point held
+on the plan's, which robots with soft leg servos need to stand on one foot), and checks what the
+feet really do:
 
 * after ``lift``: the swing foot's measured contact force with the floor has left it (liftoff);
 * after ``touchdown``: the swing foot touches the floor again, where the plan put it.
@@ -69,8 +73,19 @@ def foothold(robot: Any, side: str) -> Foothold:
     return Foothold(side, float(data.xpos[body][0]), float(data.xpos[body][1]), yaw)
 
 
+def _com_at(phase: StepPhase, times: np.ndarray) -> np.ndarray:
+    """The phase's planned CoM (world xyz) at each of ``times`` (clamped to the phase)."""
+    trajectory = phase.trajectory
+    t = np.clip(times, 0.0, trajectory.duration)
+    return np.stack([np.interp(t, trajectory.times, trajectory.com_path[:, k]) for k in range(3)], axis=1)
+
+
 class Step(RobotBehaviour):
     """Follow a step's phases in physics, one control period per tick (never blocks).
+
+    Each tick sets the phase's target and, on a robot that has it (``set_balance``), the ankle
+    balance feedback on the phase's support feet with the phase's planned CoM; the step's end
+    switches the feedback off.
 
     Succeeds when the last phase has played and the swing foot carries its share of the body.
     Fails at once when a physics detector flags a failure (a fall); with ``tracking`` when the
@@ -129,7 +144,9 @@ class Step(RobotBehaviour):
         self._ahead_t = np.zeros(0)
         self._ahead_q = np.zeros((0, 0))
         self._ahead_load: np.ndarray | None = None
+        self._ahead_com = np.zeros((0, 3))
         self._ahead_i = 0
+        self._balance: Any = None
 
     @property
     def phase(self) -> StepPhase:
@@ -138,6 +155,7 @@ class Step(RobotBehaviour):
 
     def initialise(self) -> None:
         self._robot = self.robot
+        self._balance = getattr(self._robot, "set_balance", None)
         self._index, self._t0 = 0, self._robot.time
         self._ahead_t, self._ahead_i = np.zeros(0), 0
         self.landing, self.landing_error = None, (math.inf, math.inf)
@@ -231,6 +249,7 @@ class Step(RobotBehaviour):
             times = t + dt * np.arange(self.chunk + 1, dtype=np.float64)
             self._ahead_t = times[:-1]
             self._ahead_q = phase.trajectory.sample_many(times)
+            self._ahead_com = _com_at(phase, times)
             leg_loads = getattr(getattr(self._robot, "controller", None), "leg_loads", None)
             support = [phase.support] * self.chunk
             self._ahead_load = leg_loads(self._ahead_q[:-1], support) if leg_loads is not None else None
@@ -242,6 +261,9 @@ class Step(RobotBehaviour):
             self._robot.set_joint_targets(q, qvel, leg_load=self._ahead_load[i])
         else:
             self._robot.set_joint_targets(q, qvel)
+        if self._balance is not None:
+            com = self._ahead_com[i]
+            self._balance(phase.support, com=com, com_velocity=(self._ahead_com[i + 1] - com)[:2] / dt)
 
     def _watch_com(self, stance: str) -> None:
         """Keep the least margin of the truth CoM inside the stance sole's footprint."""
@@ -251,4 +273,6 @@ class Step(RobotBehaviour):
 
     def terminate(self, new_status: Status) -> None:
         if new_status in (Status.FAILURE, Status.INVALID):
-            self.robot.hold()  # safe hold where the robot is
+            self.robot.hold()  # safe hold where the robot is (the balance feedback off)
+        elif self._balance is not None:
+            self._balance(None)  # the step is over: the plain servos hold its last target

@@ -1,10 +1,10 @@
 """Quasi-static stepping (executive/planning/stepping*.py, behaviours/step.py) in physics.
 
-The bundled humanoid steps from its standing start in MuJoCo (the plan made on the estimate
-world, executed on a truth world): forward and sideways, the fall detector silent, the foot
-landing near its planned foothold, the CoM inside the stance sole while the other foot is off
-the floor (measured from the simulated states here, not taken from the behaviour). Numbers are
-printed (pytest -s) and recorded in docs/stepping.md.
+The bundled humanoid and the Unitree G1 (when the shared model is there) step from their standing
+start in MuJoCo (the plan made on the estimate world, executed on a truth world): forward and
+sideways, the fall detector silent, the foot landing near its planned foothold, the CoM inside the
+stance sole while the other foot is off the floor (measured from the simulated states here, not
+taken from the behaviour). Numbers are printed (pytest -s) and recorded in docs/stepping.md.
 """
 
 from __future__ import annotations
@@ -197,9 +197,8 @@ def test_stance_feed_forward(humanoid: tuple[World, StepPlanner]) -> None:
 
 
 def test_the_g1_plans_a_step(g1_mjcf: Path) -> None:
-    """The G1 plans a step and measures its reach (planning only: see docs/stepping.md for why its
-    menagerie servos do not stand on one foot)."""
-    world = build(loads(_floor(f"{{mjcf: {g1_mjcf}, profile: unitree_g1}}", -0.65, 0.66), source="g1.yaml"))
+    """The G1 plans a step and measures its reach."""
+    world = build(loads(_g1_floor(g1_mjcf), source="g1.yaml"))
     planner = StepPlanner(world)
     q = world.home_qpos()
     start = planner.footholds(q)["right"]
@@ -207,6 +206,77 @@ def test_the_g1_plans_a_step(g1_mjcf: Path) -> None:
     assert plan.target.x == pytest.approx(start.x + 0.10)
     reach = measure_reach(planner, q, "left")
     assert 0.1 < reach.forward < 1.0
+
+
+def _g1_floor(g1_mjcf: Path) -> str:
+    return _floor(f"{{mjcf: {g1_mjcf}, profile: unitree_g1}}", -0.65, 0.66)
+
+
+@pytest.mark.parametrize(("swing", "dx", "dy"), [("right", 0.10, 0.0), ("left", 0.0, -0.08)])
+def test_the_g1_steps_in_physics(g1_mjcf: Path, swing: str, dx: float, dy: float) -> None:
+    """The G1 (kp 500 leg servos, a 6 cm wide sole) steps forward and sideways (inward: outward
+    the lifted foot cannot stay flat within its ankle roll range), held up by the ankle balance
+    feedback the Step behaviour switches on."""
+    scene = _g1_floor(g1_mjcf)
+    world = build(loads(scene, source="g1.yaml"))
+    planner = StepPlanner(world)
+    q = world.home_qpos()
+    start = planner.footholds(q)[swing]
+    plan = planner.plan_step(q, swing, Foothold(swing, start.x + dx, start.y + dy, start.yaw))
+    m = _execute(plan, scene)  # the fall detector silent, the step a success
+    assert m["landing_mm"] < 10.0 and m["landing_deg"] < 1.0, m
+    assert m["final_mm"] < 10.0, m
+    assert m["com_margin_mm"] > 15.0, m  # the sole's middle is about 30 mm inside its edges
+    assert m["airborne_N"] == 0.0, m
+    assert abs(m["pelvis_drop_mm"]) < 30.0, m
+
+
+def test_the_g1_falls_without_the_balance_feedback(g1_mjcf: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """Its servos alone are about as stiff as gravity's toppling stiffness on one foot: it tips
+    over the sole's outer edge at the end of the weight shift."""
+    scene = _g1_floor(g1_mjcf)
+    world = build(loads(scene, source="g1.yaml"))
+    planner = StepPlanner(world)
+    q = world.home_qpos()
+    start = planner.footholds(q)["right"]
+    plan = planner.plan_step(q, "right", Foothold("right", start.x + 0.10, start.y, start.yaw))
+    monkeypatch.setattr(SimulatedRobot, "set_balance", lambda self, *args, **kwargs: None)
+    robot = SimulatedRobot(build(loads(scene, source="g1.yaml")))
+    install(robot)
+    step = Step("step", plan)
+    tree = py_trees.trees.BehaviourTree(step)
+    tree.setup()
+    while robot.time < plan.duration and step.status in (Status.INVALID, Status.RUNNING):
+        tree.tick()
+        robot.advance()
+    assert robot.failure is not None and robot.failure.mode == "fall", robot.failure
+    print(robot.failure.detail)
+
+
+def test_the_balance_feedback_is_opt_in(humanoid: tuple[World, StepPlanner]) -> None:
+    """Off (the default, and after a hold) the servos run exactly as without it."""
+    world, _ = humanoid
+    com = world.data.subtree_com[world.ids.base_body].copy()
+    runs = []
+    for mode in ("never", "off", "held"):
+        robot = SimulatedRobot(build(loads(_floor(), source="step_floor.yaml")))
+        if mode == "off":
+            robot.set_balance(("left",), com=com)
+            robot.set_balance(None)
+        elif mode == "held":
+            robot.set_balance(("left", "right"), com=com, com_velocity=(0.0, 0.0))
+            robot.hold()
+        assert robot.balance is None
+        robot.set_joint_targets(world.home_qpos())
+        for _ in range(10):
+            robot.advance()
+        runs.append(robot.data.qpos.copy())
+    assert np.array_equal(runs[0], runs[1]) and np.array_equal(runs[0], runs[2])
+    for bad in (["middle"], [], ["left", "right", "left"]):
+        with pytest.raises(ValueError):
+            robot.set_balance(bad, com=com)
+    with pytest.raises(ValueError):
+        robot.set_balance(["left"])  # no planned CoM
 
 
 def test_a_foot_off_its_foothold_fails_with_tracking(humanoid: tuple[World, StepPlanner]) -> None:

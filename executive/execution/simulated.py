@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.execution.balance import AnkleBalance, BalanceTarget
 from executive.monitoring.detectors import Failure, FailureDetector
 from executive.world.model import World
 from executive.world.observation import SimulatedSensor
@@ -79,6 +80,7 @@ class JointTargetController:
         self._scratch = mujoco.MjData(model)
         self.feet = [int(model.body(foot.body).id) for foot in world.profile.feet.values()]
         self.foot_sides: tuple[str, ...] = tuple(world.profile.feet)
+        self._soles = [list(world.ids.foot_geoms[side]) for side in self.foot_sides]
         free = [j for j in range(model.njnt) if model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
         base = next(j for j in free if int(model.jnt_bodyid[j]) == world.ids.base_body)
         self.base_dofs = np.arange(int(model.jnt_dofadr[base]), int(model.jnt_dofadr[base]) + 6)
@@ -151,10 +153,11 @@ class JointTargetController:
         that carry the body at each target (sides of ``profile.feet``). Their wrenches balance
         the whole base, a foot left out carrying only its own leg's links (its wrench is zero):
         one foot takes all of it; several share it as the target's CoM puts it on them, the
-        wrenches with the least foot moments (:data:`STANCE_MOMENT_LENGTH`; the vertical forces
-        then follow the lever rule, so the load moves onto a foot as the CoM moves over it,
-        unlike the minimum-norm split, which keeps the forces equal and twists the feet
-        against each other). An entry of None is the minimum-norm split above.
+        wrenches with the least foot moments (:data:`STANCE_MOMENT_LENGTH`), each taken about the
+        middle of the foot's sole (its ``foot_geoms``' mean): the vertical forces then follow the
+        lever rule between the soles' middles, so the load moves onto a foot as the CoM moves
+        over its sole, unlike the minimum-norm split, which keeps the forces equal and twists
+        the feet against each other. An entry of None is the minimum-norm split above.
 
         Raises:
             ValueError: when ``stance`` has not one entry per target, or names no foot or a foot
@@ -215,8 +218,9 @@ class JointTargetController:
             mujoco.mj_kinematics(model, d)
             mujoco.mj_comPos(model, d)
             mujoco.mj_rne(model, d, 0, gravity)
-            for i, foot in enumerate(self.feet):
-                mujoco.mj_jacBody(model, d, jac[6 * i : 6 * i + 3], jac[6 * i + 3 : 6 * i + 6], foot)
+            for i, foot in enumerate(self.feet):  # each foot's wrench at the middle of its sole
+                sole = d.geom_xpos[self._soles[i]].mean(axis=0)
+                mujoco.mj_jac(model, d, jac[6 * i : 6 * i + 3], jac[6 * i + 3 : 6 * i + 6], sole, foot)
             rows = np.repeat(mask, 6)
             base = jac[rows][:, self._base_take]  # A^T of the stance feet
             scaled = weight[rows][:, None] * base  # W^-1 A^T
@@ -349,6 +353,8 @@ class SimulatedRobot:
             self._gripper_idx[side] = ids
             self.gripper_ctrl[side] = self.data.ctrl[ids].copy()
         self.stats = StepStats()
+        self.balance: BalanceTarget | None = None  # the ankle balance feedback's; None: off
+        self._balancer: AnkleBalance | None = None
 
     @property
     def time(self) -> float:
@@ -401,6 +407,39 @@ class SimulatedRobot:
         self.q_target = q
         self.qvel_target = np.zeros(self.model.nq) if qvel_target is None else np.asarray(qvel_target, float)
 
+    def set_balance(
+        self,
+        support: Sequence[str] | None,
+        com: Sequence[float] | None = None,
+        com_velocity: Sequence[float] | None = None,
+    ) -> None:
+        """Switch the ankle balance feedback (:class:`AnkleBalance`) on the ``support`` feet, or off.
+
+        While on, every control period moves the support feet's ankle servo targets so that the
+        measured capture point follows the planned one (the CoP under the feet shifts to drive
+        the error back); a stepping behaviour sets it each tick with its plan's CoM and switches
+        it off when the step ends. Off (None, the default, and after :meth:`hold`): the plain
+        servos, exactly as without it.
+
+        Args:
+            support: the feet on the floor (one or two sides of ``profile.feet``), or None: off.
+            com: the planned whole-robot CoM now (world x, y, z; m); needed with ``support``.
+            com_velocity: its planned rate (world x, y; m/s; None: at rest).
+
+        Raises:
+            ValueError: when ``support`` names no foot, more than two, or an unknown one, or
+                ``com`` is missing or not a point.
+        """
+        if support is None:
+            self.balance = None
+            return
+        if com is None:
+            raise ValueError("the balance feedback needs the planned CoM (com=)")
+        if self._balancer is None:
+            c = self.controller
+            self._balancer = AnkleBalance(self.world, c.actuators, c.kp)
+        self.balance = self._balancer.target(support, com, com_velocity)
+
     def set_gripper(self, side: str, closed: bool) -> None:
         grip = self.world.profile.arms[side].gripper
         self.gripper_ctrl[side] = np.array(grip.closed if closed else grip.open, dtype=float)
@@ -411,7 +450,8 @@ class SimulatedRobot:
         return float(np.mean(np.abs(self.data.qpos[self.model.jnt_qposadr[joints]])))
 
     def hold(self) -> None:
-        """Safe hold: servo every joint to where it is now."""
+        """Safe hold: servo every joint to where it is now (the balance feedback off)."""
+        self.balance = None
         self.q_target = self.data.qpos.copy()
         self.qvel_target = np.zeros(self.model.nq)
         self._leg_load = self.controller.leg_load(self.q_target)
@@ -425,7 +465,8 @@ class SimulatedRobot:
         :meth:`JointTargetController.joint_ctrl` for each step (the target ramps on at
         ``qvel_target``; the arm/waist gravity feed-forward is ``qfrc_bias`` at the start of the
         period), all computed at once (:meth:`JointTargetController.period`); a fixed target
-        writes them once.
+        writes them once. With the balance feedback on (:meth:`set_balance`) its ankle offsets of
+        the period's start are added to every step's targets.
         """
         data, model = self.data, self.model
         start = time.perf_counter()
@@ -438,6 +479,8 @@ class SimulatedRobot:
             model.opt.timestep,
             data,
         )
+        if self.balance is not None and self._balancer is not None:
+            self._add_balance(servo, self._balancer.offsets(data, self.q_target, self.balance))
         ctrl = data.ctrl
         for side, values in self.gripper_ctrl.items():  # fixed over the period
             ctrl[self._gripper_idx[side]] = values
@@ -456,3 +499,8 @@ class SimulatedRobot:
         self.stats.physics_steps += steps
         self.stats.physics_wall_s += time.perf_counter() - start
         return self.detector.failure
+
+    def _add_balance(self, servo: ServoPeriod, offsets: FloatArray) -> None:
+        """Add the ankle balance offsets (of this period's start) to every step's servo targets."""
+        c = self.controller
+        servo.ctrl = np.clip(servo.ctrl + offsets, c.ctrl_low, c.ctrl_high)
