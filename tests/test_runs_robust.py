@@ -344,40 +344,54 @@ def _child_run(scenario: Path, out: Path) -> int:
     return pid
 
 
+def _complete_lines(path: Path) -> int:
+    """How many whole lines ``path`` holds now (0 before it exists)."""
+    try:
+        return path.read_bytes().count(b"\n")
+    except FileNotFoundError:
+        return 0
+
+
 def test_kill_9_at_random_moments_leaves_whole_lines_and_whole_summaries(tmp_path: Path) -> None:
+    """SIGKILL at stages of the run chosen by what it has logged (events, not clock times): every
+    line left parses, the summary (if any) is whole. A reference run gives the log's length."""
     scenario = _scenario(tmp_path, alternatives=("left",))
-    t0 = time.monotonic()
     pid = _child_run(scenario, tmp_path / "reference")
     _, status = os.waitpid(pid, 0)
-    whole_s = time.monotonic() - t0
     assert os.waitstatus_to_exitcode(status) == 0
-    assert _one_run(tmp_path / "reference")[-1]["kind"] == "end"
+    reference = _one_run(tmp_path / "reference")
+    assert reference[-1]["kind"] == "end"
     rng = random.Random(15)
-    kills = 6  # one at a random moment in each sixth of the run (and a little after it)
-    moments = [whole_s * 1.05 * (i + rng.random()) / kills for i in range(kills)]
+    kills = 6  # after a random line in each sixth of the log
+    cuts = [1 + int((len(reference) - 1) * (i + rng.random()) / kills) for i in range(kills)]
     seen: list[int] = []
     cut_mid_run = 0
-    for i, moment in enumerate(moments):
+    for i, cut in enumerate(cuts):
         out = tmp_path / f"killed{i}"
         pid = _child_run(scenario, out)
-        time.sleep(moment)
+        deadline = time.monotonic() + 300.0  # generous: the log's lines arrive at any machine's pace
+        while _complete_lines(out / "decisions.jsonl") < cut and time.monotonic() < deadline:
+            if os.waitpid(pid, os.WNOHANG) != (0, 0):
+                break  # it ended before the cut: nothing to kill
+            time.sleep(0.002)
+        time.sleep(rng.random() * 0.002)  # the lines after planning come within milliseconds
         try:
             os.killpg(pid, signal.SIGKILL)  # the run and its physics worker
         except ProcessLookupError:  # it had finished
             pass
-        os.waitpid(pid, 0)
-        if not (out / "decisions.jsonl").exists():
-            seen.append(0)
-            continue
+        try:
+            os.waitpid(pid, 0)
+        except ChildProcessError:  # reaped above
+            pass
         entries = _one_run(out)  # every line parses, one run's, its summary whole if there
         seen.append(len(entries))
         if entries and entries[-1]["kind"] == "end":
             assert (out / "summary.json").exists()  # written before the end line
         elif entries:
             cut_mid_run += 1
-    print(f"whole run {whole_s:.1f} s; kills at {[round(m, 2) for m in moments]}; lines left {seen}")
-    # The kills landed at different stages of the run: while the worker process plans (a few lines)
-    # and after (more, or all); the decision's lines come in one tick now that it plans off-thread.
+    print(f"reference {len(reference)} lines; killed after lines {cuts}; lines left {seen}")
+    # The kills landed at different stages of the run: while the worker plans (the cuts in the first
+    # sixths) and after it (the later ones), whatever the machine's speed.
     assert len(set(seen)) >= 2 and cut_mid_run >= 2
 
 
