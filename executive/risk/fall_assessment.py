@@ -132,7 +132,9 @@ def _single_support_gains(world: World, knots: FallKnots) -> FloatArray:
         alone = down[i] & (np.sum(down, axis=0) == 1)
         if np.any(alone):
             height = knots.coms[alone, 2] - knots.ground
-            gains[alone] = single_support_gain(knots.mass, knots.gravity, height, ankle_stiffness(world, side))
+            gains[alone] = single_support_gain(
+                knots.mass, knots.gravity, height, ankle_stiffness(world, side)
+            )
     return gains
 
 

@@ -43,7 +43,8 @@ def ankle_stiffness(world: World, side: str) -> float:
     kps = [
         float(model.actuator_gainprm[a, 0])
         for a in range(model.nu)
-        if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT and int(model.actuator_trnid[a, 0]) in hinges[:2]
+        if model.actuator_trntype[a] == mujoco.mjtTrn.mjTRN_JOINT
+        and int(model.actuator_trnid[a, 0]) in hinges[:2]
     ]
     return min(kps) if kps else float("inf")
 
