@@ -7,9 +7,11 @@ predicted P(fall) (fused with rollouts, and the analytic model alone: "rollouts 
 observed fall rate with its 95% Clopper-Pearson interval, then the pooled ROC AUC and ECE for
 falls and the executive's cross-fitted regret (:mod:`executive.validation.regret`), both ways.
 
-    python benchmarks/bench_fall_campaign.py [--trials 10] [--jobs 2] [--out DIR] [--set fit|check|all]
+    python benchmarks/bench_fall_campaign.py [--trials 8] [--jobs 2] [--out DIR]
+        [--set fit|check|all] [--report]
 
-Takes a few minutes with 2 jobs. Results: docs/stepping.md, "Falls".
+About 2 minutes per variant with 2 jobs (12 variants); --report tabulates what --out holds.
+Results: docs/stepping.md, "Falls".
 """
 
 from __future__ import annotations
@@ -30,7 +32,7 @@ from executive.validation.stats import clopper_pearson, expected_calibration_err
 
 ROOT = Path(__file__).resolve().parents[1]
 BASE = ROOT / "scenarios" / "fall_steps.yaml"
-SIGMAS = (0.01, 0.02, 0.03, 0.05)
+SIGMAS = (0.02, 0.035, 0.05)
 #: The goal stances measured while the single-support gain was derived (fit) and those kept apart (check).
 GOALS = {"fit": ((0.4, 0.0), (0.0, 0.3)), "check": ((0.3, 0.2), (-0.2, 0.0))}
 
@@ -38,7 +40,7 @@ GOALS = {"fit": ((0.4, 0.0), (0.0, 0.3)), "check": ((0.3, 0.2), (-0.2, 0.0))}
 def variants(which: str) -> list[tuple[str, tuple[float, float], float]]:
     """(name, goal, sigma) of the variants of set ``which`` (``fit``, ``check`` or ``all``)."""
     goals = [g for key in ("fit", "check") if which in (key, "all") for g in GOALS[key]]
-    return [(f"to{x:+.1f}{y:+.1f}_com{s * 100:.0f}cm", (x, y), s) for x, y in goals for s in SIGMAS]
+    return [(f"to{x:+.1f}{y:+.1f}_com{s * 100:.1f}cm", (x, y), s) for x, y in goals for s in SIGMAS]
 
 
 def run_variant(
@@ -117,13 +119,19 @@ def table(runs: dict[str, list[dict[str, Any]]], fused: bool) -> dict[str, Any]:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--trials", type=int, default=10)
+    parser.add_argument("--trials", type=int, default=8)
     parser.add_argument("--jobs", type=int, default=2)
     parser.add_argument("--out", default=str(ROOT / "runs" / "bench_fall_campaign"))
     parser.add_argument("--set", choices=("fit", "check", "all"), default="all")
+    parser.add_argument("--report", action="store_true", help="only tabulate the variants already in --out")
     args = parser.parse_args()
     runs = {}
     for name, goal, sigma in variants(args.set):
+        trials = Path(args.out) / name / "trials.jsonl"
+        if args.report:
+            if trials.exists():
+                runs[name] = [json.loads(line) for line in trials.read_text().splitlines() if line.strip()]
+            continue
         runs[name] = run_variant(name, goal, sigma, args)
         print(f"{name}: {len(runs[name])} records", file=sys.stderr, flush=True)
     summary = {"fused": table(runs, fused=True), "analytic": table(runs, fused=False)}
