@@ -2,15 +2,17 @@
 
 On two feet the legs form a closed chain and a CoM error e stays e. On one foot the stance
 ankle's position servo (stiffness k, N m/rad) is all that holds the body up: the error's
-gravity moment m g e bends it, which moves the CoM further, so the static error is
-A e with A = 1 / (1 - m g h / k) (h the CoM height above the sole: gravity's toppling
-stiffness m g h against the servo's k). The body comes onto the one foot at the lift as a step
-of the load, and the undamped response of a second-order system to a step peaks at twice its
-static deflection, so the peak error is (2 A - 1) e (:func:`single_support_gain`). The fall
-model takes the persistent CoM bias e through that gain at every single-support knot: the
-CoM at knot k is mu_k + G_k e, i.e. e must lie in (P_k - mu_k) / G_k (:func:`shrink_polygons`).
-A robot whose ankle is no stiffer than m g h cannot stand on one foot at all (G infinite: the
-polygon shrinks to the planned CoM). Measurements: docs/stepping.md, "Falls".
+gravity moment m g e bends it by theta, which moves the CoM further (by h theta), until
+k theta = m g (e + h theta): theta_s = m g e / (k - m g h), and the centre of pressure, at
+k theta / (m g) from the ankle, is at A e with A = 1 / (1 - m g h / k) (gravity's toppling
+stiffness m g h against the servo's k). The load comes onto the one foot at the lift as a step,
+and an undamped second-order system's step response peaks at twice its static deflection:
+theta = 2 theta_s, so the centre of pressure peaks at 2 A e (the CoM at (2 A - 1) e). The sole
+must hold the centre of pressure, so the fall model takes the persistent CoM bias e through the
+gain G = 2 A at every single-support knot (:func:`single_support_gain`): e must lie in
+(P_k - mu_k) / G_k (:func:`shrink_polygons`). A robot whose ankle is no stiffer than m g h
+cannot stand on one foot at all (G infinite: the polygon shrinks to the planned CoM).
+Measurements: docs/stepping.md, "Falls".
 """
 
 from __future__ import annotations
@@ -50,19 +52,19 @@ def ankle_stiffness(world: World, side: str) -> float:
 
 
 def single_support_gain(mass: float, gravity: float, height: FloatArray, stiffness: float) -> FloatArray:
-    """Peak CoM error per unit CoM bias on one foot: 2 A - 1, A = 1 / (1 - m g h / k) (module doc).
+    """Peak centre-of-pressure shift per unit CoM bias on one foot: 2 A, A = 1 / (1 - m g h / k) (module doc).
 
     Args:
         mass: the robot's mass (kg); gravity: g (m/s^2); height: the CoM height(s) above the sole (m).
         stiffness: the stance ankle's servo stiffness k (N m/rad).
 
     Returns:
-        The gain per height, at least 1; :data:`GAIN_CAP` once m g h >= k.
+        The gain per height, at least 2; :data:`GAIN_CAP` once m g h >= k.
     """
     toppling = mass * gravity * np.asarray(height, dtype=float) / stiffness
     with np.errstate(divide="ignore"):
         static = np.where(toppling < 1.0, 1.0 / np.maximum(1.0 - toppling, 1e-12), np.inf)
-    return np.asarray(np.minimum(2.0 * static - 1.0, GAIN_CAP), dtype=float)
+    return np.asarray(np.minimum(2.0 * static, GAIN_CAP), dtype=float)
 
 
 def shrink_polygons(polygons: KnotPolygons, mus: FloatArray, gains: FloatArray) -> KnotPolygons:
