@@ -7,7 +7,7 @@ predicted P(fall) (fused with rollouts, and the analytic model alone: "rollouts 
 observed fall rate with its 95% Clopper-Pearson interval, then the pooled ROC AUC and ECE for
 falls and the executive's cross-fitted regret (:mod:`executive.validation.regret`), both ways.
 
-    python benchmarks/bench_fall_campaign.py [--trials 8] [--jobs 2] [--out DIR]
+    python -m benchmarks.bench_fall_campaign [--trials 8] [--jobs 2] [--out DIR]
         [--set fit|check|all] [--report]
 
 About 2 minutes per variant with 2 jobs (12 variants); --report tabulates what --out holds.
@@ -23,10 +23,16 @@ import sys
 import tempfile
 from pathlib import Path
 from typing import Any
+from unittest import mock
 
 import numpy as np
 import yaml
 
+from executive.risk import fall_assessment
+from executive.risk.fall_compliance import single_support_gain
+from executive.scenario.loader import loads
+from executive.schema.types import Scenario
+from executive.validation.campaign_predictions import predict
 from executive.validation.regret import regret, trial_table
 from executive.validation.stats import clopper_pearson, expected_calibration_error, roc_auc
 
@@ -118,6 +124,43 @@ def table(runs: dict[str, list[dict[str, Any]]], fused: bool) -> dict[str, Any]:
     return result
 
 
+def scenario_of(name: str, goal: tuple[float, float], sigma: float) -> Scenario:
+    """The variant's scenario (as :func:`run_variant` writes it)."""
+    data = yaml.safe_load(BASE.read_text())
+    data["name"] = name
+    data["mission"] = [{"step": {"to": list(goal)}}]
+    data["uncertainty"]["com"] = sigma
+    return loads(yaml.safe_dump(data))
+
+
+def ablation(runs: dict[str, list[dict[str, Any]]], which: str) -> None:
+    """The analytic P(fall) of each variant's plans under three single-support gains, scored on the
+    same trials: none (the model before: the CoM bias as it is on one foot), the CoM's peak
+    (2 A - 1) and the centre of pressure's peak 2 A (the model)."""
+    gains = {
+        "none": lambda *a: np.ones(np.shape(a[2])),
+        "com_peak_2A-1": lambda *a: single_support_gain(*a) - 1.0,
+        "cop_peak_2A": single_support_gain,
+    }
+    print("\n## single-support gain ablation (analytic, rollouts off)\n")
+    print("| gain | AUC | ECE | mean predicted | observed |")
+    print("| --- | --- | --- | --- | --- |")
+    for label, gain in gains.items():
+        scores, labels = [], []
+        for name, goal, sigma in variants(which):
+            if name not in runs:
+                continue
+            scenario = scenario_of(name, goal, sigma)
+            with mock.patch.object(fall_assessment, "single_support_gain", gain):
+                p = {a: predict(scenario, 0, a).risk for a in ("left_first", "right_first")}
+            for r in runs[name]:
+                if r["outcome"] != "error" and p[r["alternative"]] is not None:
+                    scores.append(float(p[r["alternative"]]["fall"]))
+                    labels.append(r["outcome"] == "fall")
+        auc, ece = roc_auc(scores, labels), expected_calibration_error(scores, labels)
+        print(f"| {label} | {auc:.3f} | {ece:.3f} | {np.mean(scores):.3f} | {np.mean(labels):.3f} |")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--trials", type=int, default=8)
@@ -125,6 +168,7 @@ def main() -> None:
     parser.add_argument("--out", default=str(ROOT / "runs" / "bench_fall_campaign"))
     parser.add_argument("--set", choices=("fit", "check", "all"), default="all")
     parser.add_argument("--report", action="store_true", help="only tabulate the variants already in --out")
+    parser.add_argument("--ablation", action="store_true", help="also score the model without the gain")
     args = parser.parse_args()
     runs = {}
     for name, goal, sigma in variants(args.set):
@@ -137,6 +181,8 @@ def main() -> None:
         print(f"{name}: {len(runs[name])} records", file=sys.stderr, flush=True)
     summary = {"fused": table(runs, fused=True), "analytic": table(runs, fused=False)}
     (Path(args.out) / "summary.json").write_text(json.dumps(summary, indent=1))
+    if args.ablation:
+        ablation(runs, args.set)
 
 
 if __name__ == "__main__":
