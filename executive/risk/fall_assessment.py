@@ -16,9 +16,14 @@ Sources (one line each):
   Phi((floor - z_min) / sigma); a planned torso tilt beyond ``SafePosture.fall_tilt_deg`` is a
   fall for sure. The failures are independent: P(fall) = 1 - (1 - P_support)(1 - P_pelvis)(1 -
   P_tilt), and the same for both bounds.
+- Single support: the stance ankle's servo compliance multiplies the CoM bias at every knot with
+  one foot down (:mod:`executive.risk.fall_compliance`); the probabilities are taken in the
+  polygons shrunk by that gain, the margins in the polygons as they are.
 """
 
 from __future__ import annotations
+
+import dataclasses
 
 import numpy as np
 from numpy.typing import NDArray
@@ -31,6 +36,7 @@ from executive.risk.fall_batch import (
     signed_margin_batch,
 )
 from executive.risk.fall_capture import capture_points
+from executive.risk.fall_compliance import ankle_stiffness, shrink_polygons, single_support_gain
 from executive.risk.fall_force import ExternalForce, support_points, under_force
 from executive.risk.fall_support import FallKnots, fall_knots
 from executive.risk.gaussian import independent_union, normal_cdf
@@ -97,20 +103,39 @@ def _posture_probability(
 
 
 def _per_knot(
-    polygons: KnotPolygons, mus: FloatArray, xi: FloatArray, cov: FloatArray
+    polygons: KnotPolygons, scored: KnotPolygons, mus: FloatArray, xi: FloatArray, cov: FloatArray
 ) -> dict[str, FloatArray]:
-    """Per knot: signed margin of ``mus``, capture margin of ``xi``, exact and Boole P(outside)."""
+    """Per knot: signed margin of ``mus``, capture margin of ``xi`` (in ``polygons``), exact and
+    Boole P(outside) (in ``scored``: the polygons shrunk by the single-support gain)."""
     count = len(mus)
     out = {name: np.zeros(count) for name in ("margin", "capture", "probability", "lower", "upper")}
-    for knots, verts in polygons.groups.values():
+    for size, (knots, verts) in polygons.groups.items():
         mu = mus[knots]
         out["margin"][knots] = signed_margin_batch(verts, mu)
         out["capture"][knots] = signed_margin_batch(verts, xi[knots])
+        verts = scored.groups[size][1]
         p = edge_probabilities_batch(verts, mu, cov)
         out["lower"][knots] = np.max(p, axis=1)
         out["upper"][knots] = np.minimum(1.0, np.sum(p, axis=1))
         out["probability"][knots] = probability_outside_batch(verts, mu, cov)
     return out
+
+
+def _single_support_gains(world: World, knots: FallKnots) -> FloatArray:
+    """Per knot: the CoM error's gain on the stance ankle's compliance when one foot alone is down
+    (:func:`executive.risk.fall_compliance.single_support_gain`), else 1."""
+    gains = np.ones(len(knots.times))
+    if len(knots.feet_down) < 2:
+        return gains
+    down = np.stack(list(knots.feet_down.values()))  # (F, K)
+    for i, side in enumerate(knots.feet_down):
+        alone = down[i] & (np.sum(down, axis=0) == 1)
+        if np.any(alone):
+            height = knots.coms[alone, 2] - knots.ground
+            gains[alone] = single_support_gain(
+                knots.mass, knots.gravity, height, ankle_stiffness(world, side)
+            )
+    return gains
 
 
 def _with_posture(p: float, posture: dict[str, float]) -> float:
@@ -156,8 +181,16 @@ def assess_fall(
     knots = fall_knots(world, trajectory)
     xi = capture_points(knots.coms, knots.times, knots.gravity, knots.ground)
     mus = support_points(knots, external)  # the traces at the mean felt force
-    per = _per_knot(knots.polygons, mus, xi, cov)
-    (probability, lower, upper), force_facts = under_force(knots, external, cov)
+    gains = _single_support_gains(world, knots)
+    scored = (
+        dataclasses.replace(knots, polygons=shrink_polygons(knots.polygons, knots.coms[:, :2], gains))
+        if np.any(gains != 1.0)
+        else knots
+    )
+    per = _per_knot(knots.polygons, scored.polygons, mus, xi, cov)
+    (probability, lower, upper), force_facts = under_force(scored, external, cov)
+    if np.any(gains != 1.0):
+        force_facts["max_single_support_gain"] = float(np.max(gains))
     posture = _posture_probability(world, knots.pelvis, knots.upright, float(uncertainty.com))
     return _report(
         world,

@@ -10,7 +10,7 @@ torso uprightness, which the fall model scores. ``support_polygon`` is re-export
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
@@ -126,7 +126,8 @@ def _foot_points_batch(world: World, xpos: FloatArray, xmat: FloatArray) -> Floa
 
 @dataclass(frozen=True)
 class FallKnots:
-    """Per knot of a trajectory: CoM, the feet's support polygons, pelvis height, torso uprightness."""
+    """Per knot of a trajectory: CoM, the feet's support polygons, pelvis height, torso uprightness,
+    which feet are on the ground."""
 
     times: FloatArray
     coms: FloatArray  # (K, 3)
@@ -136,6 +137,7 @@ class FallKnots:
     ground: float
     gravity: float
     mass: float  # the robot's
+    feet_down: dict[str, NDArray[np.bool_]] = field(default_factory=dict)  # side -> (K,) on the ground
 
 
 def fall_knots(world: World, trajectory: Trajectory) -> FallKnots:
@@ -171,7 +173,18 @@ def fall_knots(world: World, trajectory: Trajectory) -> FallKnots:
         upright[k] = data.xmat[torso][8]
     ground = _ground_height(world, data)
     points = _foot_points_batch(world, xpos, xmat.reshape(count, len(feet), 3, 3))
-    polygons = hulls(points[..., :2], points[..., 2] <= ground + 0.01)
+    down = points[..., 2] <= ground + 0.01
+    polygons = hulls(points[..., :2], down)
     gravity = float(np.linalg.norm(model.opt.gravity))
     mass = float(model.body_subtreemass[base])
-    return FallKnots(times, coms, polygons, pelvis, upright, ground, gravity, mass)
+    return FallKnots(times, coms, polygons, pelvis, upright, ground, gravity, mass, _feet_down(world, down))
+
+
+def _feet_down(world: World, down: NDArray[np.bool_]) -> dict[str, NDArray[np.bool_]]:
+    """Per foot: is any of its ground-contact points (``_foot_points`` order) down, per knot."""
+    model, out, start = world.model, {}, 0
+    for side, geoms in world.ids.foot_geoms.items():
+        count = sum(4 if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX else 1 for g in geoms)
+        out[side] = np.any(down[:, start : start + count], axis=1)
+        start += count
+    return out
