@@ -91,6 +91,13 @@ class StepPlanner:
         geoms = [g for s in sides for g in self.ik.sole_geoms[s]]
         return SupportPolygon.from_feet(self.model, self.configuration.data, geoms)
 
+    def sole_margin(self, sole: SupportPolygon) -> float:
+        """The CoM's margin (m) inside a stance sole ``sole`` in single support: the smaller of
+        ``single_support_margin`` and ``single_support_fraction`` of the sole's half width (the
+        distance from its middle to its nearest edge)."""
+        c = self.config
+        return min(c.single_support_margin, c.single_support_fraction * sole.margin(sole.centre))
+
     # --- one step -----------------------------------------------------------------------------
 
     def plan_step(self, q_start: FloatArray, swing: str, target: Foothold) -> StepPlan:
@@ -122,6 +129,7 @@ class StepPlanner:
         yaw0 = yaw_of(data.xquat[self.world.ids.base_body])
         yaw1 = circular_mean(start[stance].yaw, target.yaw)
         sole = self.sole_polygon((stance,))
+        margin = self.sole_margin(sole)
         feet = [
             ("lift", foot_pose(standing, start[swing], c.clearance), yaw0),
             ("swing", foot_pose(standing, target, c.clearance), yaw1),
@@ -130,9 +138,7 @@ class StepPlanner:
         try:
             phases = [self._run(self._shift("shift", (stance,), yaw0), collisions, floor)]
             for name, pose, yaw in feet:
-                goal = PhaseGoal(
-                    name, (stance,), swing, pose, sole.centre, False, sole, c.single_support_margin, yaw
-                )
+                goal = PhaseGoal(name, (stance,), swing, pose, sole.centre, False, sole, margin, yaw)
                 phases.append(self._run(goal, collisions, floor))
             phases.append(self._run(self._shift("shift_back", self.sides, yaw1), collisions, floor))
         except StepPlanningError as exc:
@@ -160,11 +166,13 @@ class StepPlanner:
     def _shift(self, name: str, over: tuple[str, ...], yaw: float) -> PhaseGoal:
         """A weight shift on both feet: the CoM to the middle of the soles of ``over`` (one foot:
         the stance foot; both: the two-foot polygon), inside the two-foot polygon; should a
-        limit hold it back, it may end anywhere inside those soles by ``single_support_margin``."""
+        limit hold it back, it may end anywhere inside those soles by :meth:`sole_margin` of the
+        stance sole (of both soles' polygon: the narrower of the two soles')."""
         both = self.sole_polygon(self.sides)
         region = self.sole_polygon(over) if len(over) < len(self.sides) else both
+        inside = min(self.sole_margin(self.sole_polygon((s,))) for s in over)
         margin = self.config.double_support_margin
-        return PhaseGoal(name, self.sides, None, None, region.centre, True, both, margin, yaw, region)
+        return PhaseGoal(name, self.sides, None, None, region.centre, True, both, margin, yaw, region, inside)
 
     def _run(self, goal: PhaseGoal, collisions: GeomPairCollisionLimit, floor: FloatArray) -> StepPhase:
         """Run one phase's IK from the configuration's state and time its path."""
@@ -237,7 +245,7 @@ class StepPlanner:
             sole.centre,
             False,
             sole,
-            c.single_support_margin,
+            self.sole_margin(sole),
             yaw,
         )
         self.ik.path(drive, collisions, probe=True)
