@@ -339,7 +339,9 @@ class StepIK:
                 out.append(f"joint '{name}' at its upper limit {upper:.2f} rad")
         for knee in self.knees.values() if self.knee_limit is not None else ():
             if knee.bends * (q[knee.qadr] - knee.straight) <= self.config.knee_bend + _JOINT_SLACK:
-                out.append(f"joint '{knee.joint}' at its bend limit ({self.config.knee_bend:.2f} rad from straight)")
+                out.append(
+                    f"joint '{knee.joint}' at its bend limit ({self.config.knee_bend:.2f} rad from straight)"
+                )
         base = problem.world.ids.base_body
         com_margin = goal.polygon.margin(data.subtree_com[base][:2])
         if com_margin <= goal.margin + 0.002 + _BOUND_SLACK:

@@ -229,7 +229,7 @@ class StepPlanner:
         """
         stance = self._check(q_start, swing, goal)
         start = self.footholds(q_start)
-        data, c = self.configuration.data, self.config
+        data = self.configuration.data
         body = self.ik.feet[swing]
         standing = mink.SE3(np.concatenate([data.xquat[body], data.xpos[body]]))
         collisions, _ = self.ik.collisions(swing)
