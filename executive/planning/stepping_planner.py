@@ -130,6 +130,7 @@ class StepPlanner:
         yaw1 = circular_mean(start[stance].yaw, target.yaw)
         sole = self.sole_polygon((stance,))
         margin = self.sole_margin(sole)
+        stand = self._stand(yaw0)
         feet = [
             ("lift", foot_pose(standing, start[swing], c.clearance), yaw0),
             ("swing", foot_pose(standing, target, c.clearance), yaw1),
@@ -140,7 +141,8 @@ class StepPlanner:
             for name, pose, yaw in feet:
                 goal = PhaseGoal(name, (stance,), swing, pose, sole.centre, False, sole, margin, yaw)
                 phases.append(self._run(goal, collisions, floor))
-            phases.append(self._run(self._shift("shift_back", self.sides, yaw1), collisions, floor))
+            back = self._shift("shift_back", self.sides, yaw1, stand)
+            phases.append(self._run(back, collisions, floor))
         except StepPlanningError as exc:
             raise StepPlanningError(
                 exc.name, f"{swing} foot step to {target.describe()}: {exc}", exc.binds, exc.iterations
@@ -163,16 +165,31 @@ class StepPlanner:
             raise PlanningInputError(f"the target {target} is not finite")
         return next(s for s in self.sides if s != swing)
 
-    def _shift(self, name: str, over: tuple[str, ...], yaw: float) -> PhaseGoal:
+    def _stand(self, yaw: float) -> FloatArray:
+        """Where the CoM stands from the middle of the two-foot polygon in the configuration,
+        in the frame turned by ``yaw`` (x, y; m): the robot's own stance."""
+        data = self.configuration.data
+        off = data.subtree_com[self.world.ids.base_body][:2] - self.sole_polygon(self.sides).centre
+        c, s = np.cos(yaw), np.sin(yaw)
+        return np.array([c * off[0] + s * off[1], -s * off[0] + c * off[1]])
+
+    def _shift(
+        self, name: str, over: tuple[str, ...], yaw: float, stand: FloatArray | None = None
+    ) -> PhaseGoal:
         """A weight shift on both feet: the CoM to the middle of the soles of ``over`` (one foot:
-        the stance foot; both: the two-foot polygon), inside the two-foot polygon; should a
-        limit hold it back, it may end anywhere inside those soles by :meth:`sole_margin` of the
-        stance sole (of both soles' polygon: the narrower of the two soles')."""
+        the stance foot; both: the two-foot polygon, plus ``stand`` (:meth:`_stand`) turned by
+        ``yaw``: the CoM where the robot stood over its feet before the step), inside the
+        two-foot polygon; should a limit hold it back, it may end anywhere inside those soles
+        by :meth:`sole_margin` of the stance sole (of both: the narrower of the two soles')."""
         both = self.sole_polygon(self.sides)
         region = self.sole_polygon(over) if len(over) < len(self.sides) else both
+        goal = region.centre
+        if stand is not None:
+            c, s = np.cos(yaw), np.sin(yaw)
+            goal = goal + np.array([c * stand[0] - s * stand[1], s * stand[0] + c * stand[1]])
         inside = min(self.sole_margin(self.sole_polygon((s,))) for s in over)
         margin = self.config.double_support_margin
-        return PhaseGoal(name, self.sides, None, None, region.centre, True, both, margin, yaw, region, inside)
+        return PhaseGoal(name, self.sides, None, None, goal, True, both, margin, yaw, region, inside)
 
     def _run(self, goal: PhaseGoal, collisions: GeomPairCollisionLimit, floor: FloatArray) -> StepPhase:
         """Run one phase's IK from the configuration's state and time its path."""
