@@ -88,7 +88,7 @@ class AnkleBalance:
         actuators: NDArray[np.int_],
         kp: FloatArray,
         convergence: float = 1.0,
-        integral: float = 0.5,
+        integral: float = 0.25,
     ) -> None:
         model = world.model
         self.model = model
