@@ -114,7 +114,7 @@ def _check_step(planner: StepPlanner, world: World, swing: str, dx: float, dy: f
     for phase in plan.phases[1:4]:
         assert phase.support == (plan.stance,)
         margins = sole.margins(phase.trajectory.com_path)
-        assert margins.min() >= planner.config.single_support_margin - 1e-6, phase.name
+        assert margins.min() >= planner.sole_margin(sole) - 1e-6, phase.name
     m = _execute(plan, _floor())
     assert m["landing_mm"] < 15.0 and m["landing_deg"] < 2.0, m
     assert m["final_mm"] < 20.0, m

@@ -26,6 +26,9 @@ __all__ = ["AnkleBalance", "BalanceTarget"]
 
 FloatArray = NDArray[np.float64]
 
+#: The damping (m^2) of the legs' least-squares pelvis shift.
+_DAMPING = 1e-4
+
 
 @dataclass(frozen=True)
 class BalanceTarget:
@@ -58,19 +61,34 @@ class AnkleBalance:
     foot) as target offsets ``(axis . moment) / kp``: the servo's own gain turns them back into
     the moment.
 
+    On two feet the ankles cannot move the CoM (both legs hold the pelvis where their joints put
+    it), so there the CoM's error from the plan (relative to the feet, as the capture point's) is
+    also integrated at ``integral * omega`` into a shift of the pelvis over the feet: every leg's
+    servo targets move its foot by the shift relative to the pelvis (the least-squares joint
+    offsets through the leg's Jacobian at the target, the foot's orientation kept). The shift
+    persists on one foot (the stance leg holds it; the swing foot, shifted too, still goes where
+    it was planned in the world) and is integrated again on two.
+
     Args:
         world: the truth world (its model: robot mass, gravity, feet, legs, floor).
         actuators: the servo actuators the offsets are for (their order is the offsets').
         kp: each actuator's position gain (N m/rad).
         convergence: the capture point error's decay rate over ``omega`` (1: it decays at the
             pendulum's own rate).
+        integral: the rate over ``omega`` at which the CoM error on two feet shifts the pelvis
+            (0: no shift).
 
     Raises:
         ValueError: when a foot has fewer than two servoed leg hinges.
     """
 
     def __init__(
-        self, world: World, actuators: NDArray[np.int_], kp: FloatArray, convergence: float = 1.0
+        self,
+        world: World,
+        actuators: NDArray[np.int_],
+        kp: FloatArray,
+        convergence: float = 1.0,
+        integral: float = 0.25,
     ) -> None:
         model = world.model
         self.model = model
@@ -88,6 +106,18 @@ class AnkleBalance:
         self.kp = np.asarray(kp, dtype=float)
         self.size = len(actuators)
         self.ankles = {side: self._ankle(world, side, body, servo) for side, body in self.feet.items()}
+        self.integral = integral
+        self.legs = {
+            side: [
+                (servo[j], int(model.jnt_dofadr[j]))
+                for name in world.profile.leg_joints.get(side, ())
+                if (j := int(model.joint(name).id)) in servo
+            ]
+            for side in self.feet
+        }
+        self.shift = np.zeros(2)  # the pelvis shift's integral (m, world xy); see offsets()
+        self._time: float | None = None
+        self._jac = np.zeros((6, model.nv))
 
     def _ankle(
         self, world: World, side: str, body: int, servo: dict[int, int]
@@ -155,14 +185,43 @@ class AnkleBalance:
         planned = target.com[:2] - shares @ planned_soles + target.com_velocity / omega
         mujoco.mj_subtreeVel(self.model, data)
         com, velocity = data.subtree_com[self.base], data.subtree_linvel[self.base]
-        xi = com[:2] - shares @ self._soles(data, support) + velocity[:2] / omega
+        measured = com[:2] - shares @ self._soles(data, support)
+        xi = measured + velocity[:2] / omega
         shift = (1.0 + self.convergence) * (xi - planned)
         moment = self.weight * np.array([-shift[1], shift[0], 0.0])
         out = np.zeros(self.size)
         for side, share in zip(support, shares, strict=True):
             for index, joint in self.ankles[side]:
                 out[index] = share * float(data.xaxis[joint] @ moment) / self.kp[index]
+        self._integrate(data.time, omega, support, measured - (target.com[:2] - shares @ planned_soles))
+        if self.integral > 0.0:
+            self._shift_pelvis(out)
         return out
+
+    def _integrate(self, time: float, omega: float, support: Sequence[str], error: FloatArray) -> None:
+        """On two feet, add this period's CoM ``error`` (m) to the pelvis shift; a clock that went
+        back (a new run) starts it from zero."""
+        if self._time is None or time < self._time:
+            self.shift[:] = 0.0
+            self._time = time
+        dt, self._time = min(time - self._time, 0.1), time
+        if len(support) == 2:
+            self.shift += self.integral * omega * dt * error
+
+    def _shift_pelvis(self, out: FloatArray) -> None:
+        """Add to ``out`` every leg's joint offsets that move its foot by :attr:`shift` relative to
+        the pelvis (the scratch data holds the target's kinematics)."""
+        if not self.shift.any():
+            return
+        goal = np.array([self.shift[0], self.shift[1], 0.0, 0.0, 0.0, 0.0])
+        mujoco.mj_comPos(self.model, self._scratch)  # the Jacobians' cdof
+        for side, joints in self.legs.items():
+            mujoco.mj_jacBody(self.model, self._scratch, self._jac[:3], self._jac[3:], self.feet[side])
+            dofs = [dof for _, dof in joints]
+            jac = self._jac[:, dofs]  # damped least squares: a straight knee is singular
+            dq = jac.T @ np.linalg.solve(jac @ jac.T + _DAMPING * np.eye(6), goal)
+            for (index, _), delta in zip(joints, dq, strict=True):
+                out[index] += delta
 
     def _soles(self, data: mujoco.MjData, support: Sequence[str]) -> FloatArray:
         """The middle (xy) of each support foot's sole geoms in ``data``, one row per foot."""

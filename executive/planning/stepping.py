@@ -5,20 +5,20 @@ The public entry of the step planner (see docs/stepping.md). One step of the ``s
 
 1. ``shift``: both feet on the floor, the CoM moves over the middle of the stance sole;
 2. ``lift``: the swing foot rises by ``clearance``, the CoM kept inside the stance sole shrunk by
-   ``single_support_margin`` (a single-support polygon);
+   its margin (:meth:`StepPlanner.sole_margin`: a single-support polygon);
 3. ``swing``: the foot moves (and turns) to above its foothold;
 4. ``touchdown``: it comes down flat onto the floor;
-5. ``shift_back``: both feet on the floor, the CoM to the middle of the new two-foot polygon.
+5. ``shift_back``: both feet on the floor, the CoM back to where the robot stood over its feet.
 
-The torso stays upright (the whole-body planner's tilt limit), the pelvis above its safe
-posture's floor, the joints in their ranges and speed limits, the arms and the waist held, the
-swing leg clear of the stance leg and both legs clear of the scene. Each phase is a
-:class:`~executive.planning.timing.Trajectory` re-timed as any planned motion: minimum-jerk,
-the zero-moment point inside the phase's support polygon. A foothold the leg cannot reach is
-refused with a :class:`StepPlanningError` naming the limits that bind (``binds``).
-:func:`measure_reach` measures by IK how far a foot can step; :func:`plan_steps` walks to a goal
-stance in steps within a fraction of that reach, alternating feet. The bundled physics follows a
-step with :class:`behaviours.step.Step`.
+The knees stay bent (:mod:`executive.planning.stepping_knees`), the torso upright (the
+whole-body planner's tilt limit), the pelvis above its safe posture's floor, the joints in their
+ranges and speed limits, the arms and the waist held, the swing leg clear of the stance leg and
+both legs clear of the scene. Each phase is a :class:`~executive.planning.timing.Trajectory`
+re-timed as any planned motion: minimum-jerk, the zero-moment point inside the phase's support
+polygon. A foothold the leg cannot reach is refused with a :class:`StepPlanningError` naming the
+limits that bind (``binds``). :func:`measure_reach` measures by IK how far a foot can step;
+:func:`plan_steps` walks to a goal stance in steps within a fraction of that reach, alternating
+feet. The bundled physics follows a step with :class:`behaviours.step.Step`.
 
 Usage::
 

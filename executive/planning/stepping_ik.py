@@ -23,6 +23,7 @@ from executive.planning.limits import GeomPairCollisionLimit, SupportPolygon, Su
 from executive.planning.problem import PlanningProblem
 from executive.planning.rotation import rotation_angle, rotation_log
 from executive.planning.stepping_geometry import yaw_quat
+from executive.planning.stepping_knees import KneeBendLimit, find_knees
 from executive.planning.stepping_types import StepConfig
 from executive.planning.types import PlanningError
 from executive.world.model import is_descendant
@@ -53,8 +54,8 @@ class PhaseGoal(NamedTuple):
     foot and its goal pose (None: no foot moves); ``com_goal``: the CoM's xy target, which the
     phase must reach when ``com_required``; ``polygon``/``margin``: the support polygon the
     CoM stays inside, shrunk by ``margin`` (m); ``pelvis_yaw``: the pelvis's heading (rad);
-    ``com_region``: where a CoM that stalls short of its goal may end the phase (inside it by
-    ``single_support_margin``; None: it may not).
+    ``com_region``/``region_margin``: where a CoM that stalls short of its goal may end the
+    phase (inside it by ``region_margin`` (m); None: it may not).
     """
 
     name: str
@@ -67,6 +68,7 @@ class PhaseGoal(NamedTuple):
     margin: float
     pelvis_yaw: float
     com_region: SupportPolygon | None = None
+    region_margin: float = 0.0
 
 
 class StepIK:
@@ -105,6 +107,8 @@ class StepIK:
         self.home_pelvis_quat = np.array(world.home_qpos()[problem.quat_adr[0] : problem.quat_adr[0] + 4])
         self._posture(world.profile.leg_joints, world.profile.waist_joints)
         self._leg_ranges(world.profile.leg_joints, world.profile.waist_joints)
+        self.knees = find_knees(model, world.home_qpos(), world.profile.leg_joints, self.feet)
+        self.knee_limit = KneeBendLimit(model, self.knees, c.knee_bend) if c.knee_bend > 0 else None
         self._collision_limits: dict[str, tuple[GeomPairCollisionLimit, FloatArray]] = {}
         self._active = self.collisions(next(iter(self.feet)))[0]  # the limit of the phase running
 
@@ -239,6 +243,8 @@ class StepIK:
         margin = goal.margin + 0.002  # as the planner's: interpolated knots stay inside the checked one
         balance = SupportPolygonLimit(self.model, problem.world.ids.base_body, goal.polygon, margin)
         limits: list[mink.Limit] = [problem.tilt, problem.pelvis, balance, collisions]
+        if self.knee_limit is not None:
+            limits.append(self.knee_limit)
         return tasks, limits, constraints
 
     def _lead(self, goal: PhaseGoal) -> None:
@@ -304,11 +310,11 @@ class StepIK:
 
     def _settled(self, goal: PhaseGoal) -> bool:
         """Whether a stalled phase may end where it is: its foot arrived and its CoM inside its
-        ``com_region`` shrunk by ``single_support_margin``."""
+        ``com_region`` shrunk by ``region_margin``."""
         if goal.com_region is None or not self._foot_arrived(goal):
             return False
         com = self.configuration.data.subtree_com[self.problem.world.ids.base_body][:2]
-        return goal.com_region.margin(com) >= self.config.single_support_margin
+        return goal.com_region.margin(com) >= goal.region_margin
 
     def _foot_arrived(self, goal: PhaseGoal) -> bool:
         c = self.config
@@ -331,6 +337,11 @@ class StepIK:
                 out.append(f"joint '{name}' at its lower limit {lower:.2f} rad")
             elif q[qadr] >= upper - _JOINT_SLACK:
                 out.append(f"joint '{name}' at its upper limit {upper:.2f} rad")
+        for knee in self.knees.values() if self.knee_limit is not None else ():
+            if knee.bends * (q[knee.qadr] - knee.straight) <= self.config.knee_bend + _JOINT_SLACK:
+                out.append(
+                    f"joint '{knee.joint}' at its bend limit ({self.config.knee_bend:.2f} rad from straight)"
+                )
         base = problem.world.ids.base_body
         com_margin = goal.polygon.margin(data.subtree_com[base][:2])
         if com_margin <= goal.margin + 0.002 + _BOUND_SLACK:

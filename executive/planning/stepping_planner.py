@@ -91,6 +91,13 @@ class StepPlanner:
         geoms = [g for s in sides for g in self.ik.sole_geoms[s]]
         return SupportPolygon.from_feet(self.model, self.configuration.data, geoms)
 
+    def sole_margin(self, sole: SupportPolygon) -> float:
+        """The CoM's margin (m) inside a stance sole ``sole`` in single support: the smaller of
+        ``single_support_margin`` and ``single_support_fraction`` of the sole's half width (the
+        distance from its middle to its nearest edge)."""
+        c = self.config
+        return min(c.single_support_margin, c.single_support_fraction * sole.margin(sole.centre))
+
     # --- one step -----------------------------------------------------------------------------
 
     def plan_step(self, q_start: FloatArray, swing: str, target: Foothold) -> StepPlan:
@@ -122,6 +129,8 @@ class StepPlanner:
         yaw0 = yaw_of(data.xquat[self.world.ids.base_body])
         yaw1 = circular_mean(start[stance].yaw, target.yaw)
         sole = self.sole_polygon((stance,))
+        margin = self.sole_margin(sole)
+        stand = self._stand(yaw0)
         feet = [
             ("lift", foot_pose(standing, start[swing], c.clearance), yaw0),
             ("swing", foot_pose(standing, target, c.clearance), yaw1),
@@ -130,11 +139,10 @@ class StepPlanner:
         try:
             phases = [self._run(self._shift("shift", (stance,), yaw0), collisions, floor)]
             for name, pose, yaw in feet:
-                goal = PhaseGoal(
-                    name, (stance,), swing, pose, sole.centre, False, sole, c.single_support_margin, yaw
-                )
+                goal = PhaseGoal(name, (stance,), swing, pose, sole.centre, False, sole, margin, yaw)
                 phases.append(self._run(goal, collisions, floor))
-            phases.append(self._run(self._shift("shift_back", self.sides, yaw1), collisions, floor))
+            back = self._shift("shift_back", self.sides, yaw1, stand)
+            phases.append(self._run(back, collisions, floor))
         except StepPlanningError as exc:
             raise StepPlanningError(
                 exc.name, f"{swing} foot step to {target.describe()}: {exc}", exc.binds, exc.iterations
@@ -157,14 +165,31 @@ class StepPlanner:
             raise PlanningInputError(f"the target {target} is not finite")
         return next(s for s in self.sides if s != swing)
 
-    def _shift(self, name: str, over: tuple[str, ...], yaw: float) -> PhaseGoal:
+    def _stand(self, yaw: float) -> FloatArray:
+        """Where the CoM stands from the middle of the two-foot polygon in the configuration,
+        in the frame turned by ``yaw`` (x, y; m): the robot's own stance."""
+        data = self.configuration.data
+        off = data.subtree_com[self.world.ids.base_body][:2] - self.sole_polygon(self.sides).centre
+        c, s = np.cos(yaw), np.sin(yaw)
+        return np.array([c * off[0] + s * off[1], -s * off[0] + c * off[1]])
+
+    def _shift(
+        self, name: str, over: tuple[str, ...], yaw: float, stand: FloatArray | None = None
+    ) -> PhaseGoal:
         """A weight shift on both feet: the CoM to the middle of the soles of ``over`` (one foot:
-        the stance foot; both: the two-foot polygon), inside the two-foot polygon; should a
-        limit hold it back, it may end anywhere inside those soles by ``single_support_margin``."""
+        the stance foot; both: the two-foot polygon, plus ``stand`` (:meth:`_stand`) turned by
+        ``yaw``: the CoM where the robot stood over its feet before the step), inside the
+        two-foot polygon; should a limit hold it back, it may end anywhere inside those soles
+        by :meth:`sole_margin` of the stance sole (of both: the narrower of the two soles')."""
         both = self.sole_polygon(self.sides)
         region = self.sole_polygon(over) if len(over) < len(self.sides) else both
+        goal = region.centre
+        if stand is not None:
+            c, s = np.cos(yaw), np.sin(yaw)
+            goal = goal + np.array([c * stand[0] - s * stand[1], s * stand[0] + c * stand[1]])
+        inside = min(self.sole_margin(self.sole_polygon((s,))) for s in over)
         margin = self.config.double_support_margin
-        return PhaseGoal(name, self.sides, None, None, region.centre, True, both, margin, yaw, region)
+        return PhaseGoal(name, self.sides, None, None, goal, True, both, margin, yaw, region, inside)
 
     def _run(self, goal: PhaseGoal, collisions: GeomPairCollisionLimit, floor: FloatArray) -> StepPhase:
         """Run one phase's IK from the configuration's state and time its path."""
@@ -221,7 +246,7 @@ class StepPlanner:
         """
         stance = self._check(q_start, swing, goal)
         start = self.footholds(q_start)
-        data, c = self.configuration.data, self.config
+        data = self.configuration.data
         body = self.ik.feet[swing]
         standing = mink.SE3(np.concatenate([data.xquat[body], data.xpos[body]]))
         collisions, _ = self.ik.collisions(swing)
@@ -237,7 +262,7 @@ class StepPlanner:
             sole.centre,
             False,
             sole,
-            c.single_support_margin,
+            self.sole_margin(sole),
             yaw,
         )
         self.ik.path(drive, collisions, probe=True)

@@ -50,11 +50,16 @@ class StepConfig:
 
     Geometry:
         clearance: m the swing foot rises above the floor before it swings.
-        single_support_margin: m the CoM keeps inside the stance sole during lift, swing and
-            touchdown (the sole's footprint shrunk by it).
+        single_support_margin, single_support_fraction: the CoM keeps inside the stance sole
+            during lift, swing and touchdown (the sole's footprint shrunk by it) the smaller of
+            ``single_support_margin`` (m) and ``single_support_fraction`` of the sole's half
+            width (the distance from its middle to its nearest edge): a narrow sole keeps room
+            for the CoM to move (:meth:`~executive.planning.stepping_planner.StepPlanner.sole_margin`).
         double_support_margin: m the CoM keeps inside the two feet's polygon in the weight shifts.
         leg_clearance: m kept between the swing leg and the stance leg (and the legs and the
             scene's table, obstacles and objects).
+        knee_bend: rad each knee keeps from straight
+            (:class:`~executive.planning.stepping_knees.KneeBendLimit`; 0: no limit).
     IK:
         foot_position_tolerance (m), foot_angle_tolerance_rad: the swing foot has arrived.
         com_tolerance: m the CoM ends from its target in a weight shift.
@@ -78,8 +83,10 @@ class StepConfig:
 
     clearance: float = 0.05
     single_support_margin: float = 0.03
+    single_support_fraction: float = 0.4
     double_support_margin: float = 0.02
     leg_clearance: float = 0.02
+    knee_bend: float = 0.15
     foot_position_tolerance: float = 0.002
     foot_angle_tolerance_rad: float = float(np.radians(1.0))
     com_tolerance: float = 0.004
