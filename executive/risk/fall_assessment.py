@@ -16,9 +16,10 @@ Sources (one line each):
   Phi((floor - z_min) / sigma); a planned torso tilt beyond ``SafePosture.fall_tilt_deg`` is a
   fall for sure. The failures are independent: P(fall) = 1 - (1 - P_support)(1 - P_pelvis)(1 -
   P_tilt), and the same for both bounds.
-- Single support: the stance ankle's servo compliance multiplies the CoM bias at every knot with
-  one foot down (:mod:`executive.risk.fall_compliance`); the probabilities are taken in the
-  polygons shrunk by that gain, the margins in the polygons as they are.
+- Single support: the polygon is the stance sole's. Knots with one foot down may weigh the CoM
+  bias by a gain (the probabilities taken in the polygons shrunk by it, the margins in the polygons
+  as they are); :func:`single_support_gain` is 1 for the steps the executive runs (docs/stepping.md,
+  "Falls"), :mod:`executive.risk.fall_compliance` the open-loop stance's.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ from executive.risk.fall_batch import (
     signed_margin_batch,
 )
 from executive.risk.fall_capture import capture_points
-from executive.risk.fall_compliance import ankle_stiffness, shrink_polygons, single_support_gain
+from executive.risk.fall_compliance import ankle_stiffness, shrink_polygons
 from executive.risk.fall_force import ExternalForce, support_points, under_force
 from executive.risk.fall_support import FallKnots, fall_knots
 from executive.risk.gaussian import independent_union, normal_cdf
@@ -119,6 +120,18 @@ def _per_knot(
         out["upper"][knots] = np.minimum(1.0, np.sum(p, axis=1))
         out["probability"][knots] = probability_outside_batch(verts, mu, cov)
     return out
+
+
+def single_support_gain(mass: float, gravity: float, height: FloatArray, stiffness: float) -> FloatArray:
+    """The CoM bias's gain on one foot for the steps the executive runs: 1.
+
+    A step runs with the capture-point ankle balance and the pelvis shift on
+    (:mod:`executive.execution.balance`): the CoM error neither grows on the ankle's compliance
+    nor peaks at lift-off as an open-loop stance's would (2 A,
+    :func:`executive.risk.fall_compliance.single_support_gain`); measured, the plain model scores
+    the falls best (docs/stepping.md, "Falls").
+    """
+    return np.ones_like(np.asarray(height, dtype=float))
 
 
 def _single_support_gains(world: World, knots: FallKnots) -> FloatArray:
