@@ -31,6 +31,7 @@ import py_trees
 from behaviours.robot_access import RobotBehaviour
 from executive.planning.limits import SupportPolygon
 from executive.planning.stepping import Foothold, StepPhase, StepPlan
+from executive.planning.stepping_geometry import yaw_of
 
 __all__ = ["Step", "foot_force", "foothold", "sole_gap"]
 
@@ -68,9 +69,7 @@ def foothold(robot: Any, side: str) -> Foothold:
     """Where the ``side`` foot stands now (its body's x, y and yaw)."""
     world, data = robot.world, robot.data
     body = world.model.body(world.profile.feet[side].body).id
-    w, x, y, z = (float(v) for v in data.xquat[body])
-    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-    return Foothold(side, float(data.xpos[body][0]), float(data.xpos[body][1]), yaw)
+    return Foothold(side, float(data.xpos[body][0]), float(data.xpos[body][1]), yaw_of(data.xquat[body]))
 
 
 def _com_at(phase: StepPhase, times: np.ndarray) -> np.ndarray:

@@ -196,14 +196,8 @@ class IKLoop:
         The same QP as a step (mink.solve_ik) with no task but the damping, so its solution is the
         minimum-norm correction of the linearised feet constraints; each pass squares the error.
         """
-        conf, cfg, feet = self.configuration, self.config, self.problem.feet
-        for _ in range(3):
-            drift = max(float(np.linalg.norm(f.compute_error(conf))) for f in feet)
-            if drift < cfg.feet_tolerance:
-                return
-            velocity = self.problem.joints.project(conf, feet, cfg.ik_dt)
-            conf.integrate_inplace(velocity, cfg.ik_dt)
-            conf.update()
+        cfg = self.config
+        self.problem.project_drift(self.configuration, self.problem.feet, cfg.feet_tolerance, cfg.ik_dt)
 
     def _errors(self, goals: dict[str, mink.SE3]) -> dict[str, tuple[float, float]]:
         """Per hand: distance (m) and rotation angle (rad) from its goal."""

@@ -297,3 +297,18 @@ class PlanningProblem:
             site_pose(data, ids.hand_sites[side]).inverse() @ body_pose(data, ids.object_bodies[obj]),
         )
         return attach, relative
+
+    def project_drift(
+        self, conf: mink.Configuration, held: Sequence[mink.Task], tolerance: float, dt: float
+    ) -> None:
+        """Remove the ``held`` tasks' second-order drift from ``conf``: the least-norm dq with their rows
+        exact (the QP of a step with no task but the damping), up to three passes, each squaring the
+        error, until it is below ``tolerance``."""
+        if not held:
+            return
+        for _ in range(3):
+            drift = max(float(np.linalg.norm(t.compute_error(conf))) for t in held)
+            if drift < tolerance:
+                return
+            conf.integrate_inplace(self.joints.project(conf, held, dt), dt)
+            conf.update()

@@ -274,16 +274,8 @@ class StepIK:
 
     def _project(self, constraints: list[mink.Task]) -> None:
         """Remove the held feet's second-order drift (as the whole-body planner's feet projection)."""
-        conf, cfg = self.configuration, self.planner_config
-        if not constraints:
-            return
-        for _ in range(3):
-            drift = max(float(np.linalg.norm(t.compute_error(conf))) for t in constraints)
-            if drift < cfg.feet_tolerance:
-                return
-            velocity = self.problem.joints.project(conf, constraints, cfg.ik_dt)
-            conf.integrate_inplace(velocity, cfg.ik_dt)
-            conf.update()
+        cfg = self.planner_config
+        self.problem.project_drift(self.configuration, constraints, cfg.feet_tolerance, cfg.ik_dt)
 
     # --- progress -----------------------------------------------------------------------------
 

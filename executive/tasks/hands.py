@@ -134,6 +134,4 @@ def _walked(world: World, start: FloatArray, start_heading: float) -> _Walked:
     if not world.follows_base:
         return _Walked(start, 0.0, np.zeros(2))
     base = world.data.qpos[world.base_qpos]
-    w, x, y, z = base[3:]
-    heading = float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
-    return _Walked(start, heading - start_heading, np.asarray(base[:2], dtype=float) - start[:2])
+    return _Walked(start, yaw_of(base[3:]) - start_heading, np.asarray(base[:2], dtype=float) - start[:2])
