@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 from executive.planning.limits import GeomPairCollisionLimit, SupportPolygon, SupportPolygonLimit, geom_pairs
 from executive.planning.problem import PlanningProblem
 from executive.planning.rotation import rotation_angle, rotation_log
+from executive.planning.stepping_ankles import AnkleReserveLimit, reserve_limit, waist_roll
 from executive.planning.stepping_geometry import yaw_quat
 from executive.planning.stepping_knees import KneeBendLimit, find_knees
 from executive.planning.stepping_types import StepConfig
@@ -55,7 +56,8 @@ class PhaseGoal(NamedTuple):
     phase must reach when ``com_required``; ``polygon``/``margin``: the support polygon the
     CoM stays inside, shrunk by ``margin`` (m); ``pelvis_yaw``: the pelvis's heading (rad);
     ``com_region``/``region_margin``: where a CoM that stalls short of its goal may end the
-    phase (inside it by ``region_margin`` (m); None: it may not).
+    phase (inside it by ``region_margin`` (m); None: it may not); ``waist``: the waist joints'
+    angles the posture task holds (None: where the phase starts).
     """
 
     name: str
@@ -69,6 +71,7 @@ class PhaseGoal(NamedTuple):
     pelvis_yaw: float
     com_region: SupportPolygon | None = None
     region_margin: float = 0.0
+    waist: FloatArray | None = None
 
 
 class StepIK:
@@ -109,6 +112,11 @@ class StepIK:
         self._leg_ranges(world.profile.leg_joints, world.profile.waist_joints)
         self.knees = find_knees(model, world.home_qpos(), world.profile.leg_joints, self.feet)
         self.knee_limit = KneeBendLimit(model, self.knees, c.knee_bend) if c.knee_bend > 0 else None
+        self.ankle_limit: AnkleReserveLimit | None = (
+            reserve_limit(world, self.feet, self.sole_geoms, c.balance_reserve_sigmas)
+            if c.balance_reserve
+            else None
+        )
         self._collision_limits: dict[str, tuple[GeomPairCollisionLimit, FloatArray]] = {}
         self._active = self.collisions(next(iter(self.feet)))[0]  # the limit of the phase running
 
@@ -122,9 +130,13 @@ class StepIK:
             cost[[model.jnt_dofadr[j] for j in joints]] = c.posture_leg_cost
             self.leg_qadr[side] = np.array([model.jnt_qposadr[j] for j in joints], dtype=int)
         cost[[model.jnt_dofadr[model.joint(n).id] for n in waist]] = c.posture_waist_cost
+        self.waist_qadr = np.array([model.jnt_qposadr[model.joint(n).id] for n in waist], dtype=int)
         for dofs in self.problem.arm_dofs.values():
             cost[dofs] = c.posture_arm_cost
         self.posture = mink.PostureTask(model, cost=cost, gain=self.planner_config.posture_gain)
+        self._posture_cost = cost
+        roll = waist_roll(model, self.problem.world.home_qpos(), self.problem.world.ids.base_body, waist)
+        self.waist_roll_dof = None if roll is None else int(model.jnt_dofadr[model.joint(roll).id])
 
     def _leg_ranges(self, legs: dict[str, tuple[str, ...]], waist: Sequence[str]) -> None:
         """The leg and waist joints with a range: (name, qpos address, lower, upper)."""
@@ -178,7 +190,7 @@ class StepIK:
     # --- one phase ----------------------------------------------------------------------------
 
     def path(
-        self, goal: PhaseGoal, collisions: GeomPairCollisionLimit, probe: bool = False
+        self, goal: PhaseGoal, collisions: GeomPairCollisionLimit, probe: bool = False, lean: bool = False
     ) -> tuple[list[FloatArray], int]:
         """IK steps from the configuration's current state until the phase's goal is reached.
 
@@ -186,6 +198,8 @@ class StepIK:
             goal: the phase's goal.
             collisions: the collision limit of the step (:meth:`collisions`).
             probe: stop quietly at a stall instead of raising (a reach probe).
+            lean: the waist's roll held at ``lean_cost`` instead of the waist's posture cost (the
+                torso leans over the stance foot where the legs leave the CoM short).
 
         Returns:
             The path (qpos per step, the start first) and the iterations.
@@ -195,6 +209,10 @@ class StepIK:
                 the QP has no solution.
         """
         conf, c, cfg = self.configuration, self.config, self.planner_config
+        cost = self._posture_cost.copy()
+        if lean and self.waist_roll_dof is not None:
+            cost[self.waist_roll_dof] = c.lean_cost
+        self.posture.set_cost(cost)
         tasks, limits, constraints = self._set_tasks(goal, collisions)
         self._active = collisions
         path = [conf.q]
@@ -233,6 +251,8 @@ class StepIK:
         target = conf.q.copy()
         legs = np.concatenate(list(self.leg_qadr.values()))
         target[legs] = problem.world.home_qpos()[legs]
+        if goal.waist is not None:
+            target[self.waist_qadr] = goal.waist
         self.posture.set_target(target)
         quat = np.empty(4)
         mujoco.mju_mulQuat(quat, yaw_quat(goal.pelvis_yaw), self.home_pelvis_quat)
@@ -245,6 +265,9 @@ class StepIK:
         limits: list[mink.Limit] = [problem.tilt, problem.pelvis, balance, collisions]
         if self.knee_limit is not None:
             limits.append(self.knee_limit)
+        if self.ankle_limit is not None:
+            self.ankle_limit.support = goal.held
+            limits.append(self.ankle_limit)
         return tasks, limits, constraints
 
     def _lead(self, goal: PhaseGoal) -> None:
@@ -313,6 +336,14 @@ class StepIK:
         pos, ang = self.foot_error(goal)
         return pos <= c.foot_position_tolerance and ang <= c.foot_angle_tolerance_rad
 
+    def short_at_reserve(self, goal: PhaseGoal) -> bool:
+        """Whether the phase ended with its CoM farther than ``com_tolerance`` from its goal and
+        a held foot's ankle at its balance reserve, with a waist roll that could lean the torso."""
+        if self.ankle_limit is None or self.waist_roll_dof is None:
+            return False
+        at_reserve = self.ankle_limit.binding(self.configuration.q, goal.held)
+        return bool(at_reserve) and self.com_error(goal) > self.config.com_tolerance
+
     def _stalled(self, history: list[float]) -> bool:
         n = self.config.stall_iterations
         return len(history) > n and history[-n - 1] - history[-1] < self.config.stall_improvement
@@ -334,6 +365,8 @@ class StepIK:
                 out.append(
                     f"joint '{knee.joint}' at its bend limit ({self.config.knee_bend:.2f} rad from straight)"
                 )
+        if self.ankle_limit is not None:
+            out += self.ankle_limit.binding(q, goal.held)
         base = problem.world.ids.base_body
         com_margin = goal.polygon.margin(data.subtree_com[base][:2])
         if com_margin <= goal.margin + 0.002 + _BOUND_SLACK:

@@ -141,7 +141,9 @@ class StepPlanner:
             for name, pose, yaw in feet:
                 goal = PhaseGoal(name, (stance,), swing, pose, sole.centre, False, sole, margin, yaw)
                 phases.append(self._run(goal, collisions, floor))
-            back = self._shift("shift_back", self.sides, yaw1, stand)
+            back = self._shift("shift_back", self.sides, yaw1, stand)._replace(
+                waist=q_start[self.ik.waist_qadr]
+            )
             phases.append(self._run(back, collisions, floor))
         except StepPlanningError as exc:
             raise StepPlanningError(
@@ -192,8 +194,20 @@ class StepPlanner:
         return PhaseGoal(name, self.sides, None, None, goal, True, both, margin, yaw, region, inside)
 
     def _run(self, goal: PhaseGoal, collisions: GeomPairCollisionLimit, floor: FloatArray) -> StepPhase:
-        """Run one phase's IK from the configuration's state and time its path."""
-        path, iterations = self.ik.path(goal, collisions)
+        """Run one phase's IK from the configuration's state and time its path. A phase whose CoM
+        the legs leave short, a support ankle at its balance reserve, is planned again with the
+        torso leaning over the stance foot (the waist's roll at ``lean_cost``)."""
+        start = self.configuration.q.copy()
+        try:
+            path, iterations = self.ik.path(goal, collisions)
+            short = self.ik.short_at_reserve(goal)
+        except StepPlanningError as exc:
+            if self.ik.waist_roll_dof is None or not any("balance reserve" in b for b in exc.binds):
+                raise
+            short = True
+        if short:
+            self.configuration.update(start)
+            path, iterations = self.ik.path(goal, collisions, lean=True)
         trajectory = self._timed(goal, np.array(path), collisions, floor, iterations)
         return StepPhase(goal.name, trajectory, goal.held)
 

@@ -60,6 +60,11 @@ class StepConfig:
             scene's table, obstacles and objects).
         knee_bend: rad each knee keeps from straight
             (:class:`~executive.planning.stepping_knees.KneeBendLimit`; 0: no limit).
+        balance_reserve: the ankle hinges of the feet on the floor keep room in their range for
+            the balance feedback (:class:`~executive.planning.stepping_ankles.AnkleReserveLimit`):
+            the servo angle that puts the CoP at the sole's edge, and their share of a pelvis
+            shift of ``balance_reserve_sigmas`` standard deviations of the scenario's
+            ``uncertainty.com`` (False: the joint ranges alone).
     IK:
         foot_position_tolerance (m), foot_angle_tolerance_rad: the swing foot has arrived.
         com_tolerance: m the CoM ends from its target in a weight shift.
@@ -68,6 +73,9 @@ class StepConfig:
         foot_position_cost, foot_orientation_cost, com_cost, pelvis_orientation_cost: task costs.
         posture_leg_cost, posture_waist_cost, posture_arm_cost: the posture task's costs on the
             legs (towards their start angles), the waist and the arms (held at their start).
+        lean_cost: the posture cost of the waist's roll joint when a phase whose CoM the legs
+            leave short, an ankle at its balance reserve, is planned again leaning the torso
+            over the stance foot.
         max_iterations, stall_iterations, stall_improvement: a phase fails after
             ``max_iterations`` IK steps, or when its error improved less than
             ``stall_improvement`` (m + rad) over ``stall_iterations`` steps.
@@ -87,6 +95,8 @@ class StepConfig:
     double_support_margin: float = 0.02
     leg_clearance: float = 0.02
     knee_bend: float = 0.15
+    balance_reserve: bool = True
+    balance_reserve_sigmas: float = 2.0
     foot_position_tolerance: float = 0.002
     foot_angle_tolerance_rad: float = float(np.radians(1.0))
     com_tolerance: float = 0.004
@@ -100,6 +110,7 @@ class StepConfig:
     posture_leg_cost: float = 0.5
     posture_waist_cost: float = 20.0
     posture_arm_cost: float = 10.0
+    lean_cost: float = 0.5
     max_iterations: int = 800
     stall_iterations: int = 40
     stall_improvement: float = 1e-4
