@@ -3,9 +3,12 @@
 Position servos alone hold a pose only as stiffly as their gains: on one foot a robot whose
 leg servos (in series with the floor contact) are softer than gravity's toppling stiffness
 ``m g h`` drifts off its plan and tips over the sole's edge. :class:`AnkleBalance` is the
-low-level balance loop a humanoid runs under its joint targets: each control period it measures
-the CoM and its velocity, compares the capture point with the plan's, and moves the centre of
-pressure under the feet to drive the error back, through the ankle servos' targets.
+low-level balance loop a humanoid runs under its joint targets: each control period it estimates
+the CoM and its velocity as the robot can (its own model's CoM corrected by its feet's force
+sensors, :class:`~executive.execution.com_estimate.CoMEstimate`; never the simulation's truth),
+compares the capture point with the plan's, and moves the centre of pressure under the feet to
+drive the error back, through the ankle servos' targets; on one foot it integrates those targets
+until the foot's measured CoP is the commanded one (:class:`~executive.execution.cop_tracking.CoPTracking`).
 :class:`executive.execution.simulated.SimulatedRobot` runs it while a stepping behaviour asks for
 it (:meth:`~executive.execution.simulated.SimulatedRobot.set_balance`); see docs/stepping.md.
 """
@@ -20,6 +23,8 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.execution.com_estimate import CoMEstimate
+from executive.execution.cop_tracking import CoPTracking
 from executive.world.model import World
 
 __all__ = ["AnkleBalance", "BalanceTarget"]
@@ -49,9 +54,10 @@ class AnkleBalance:
     """Capture-point feedback on the ankles of the feet on the floor; every gain from the model.
 
     With ``omega = sqrt(g / h)`` (``h``: the planned CoM's height above the floor) the capture
-    point is ``xi = c + c_dot / omega``. The measured one (the CoM of the robot's state and its
-    velocity) is taken relative to the support feet where they stand, the planned one relative to
-    where the target puts them, so a foot that slid a little carries its CoM reference along. The
+    point is ``xi = c + c_dot / omega``. The measured one (the robot's estimate of its CoM and
+    velocity, :class:`~executive.execution.com_estimate.CoMEstimate`) is taken relative to the
+    support feet where they stand, the planned one relative to where the target puts them, so a
+    foot that slid a little carries its CoM reference along. The
     centre of pressure moves by ``dp = (1 + convergence) (xi - xi_plan)``: the divergent component
     of motion then decays at ``convergence * omega`` (``xi_dot = omega (xi - p)``; Englsberger et
     al. 2015; ankle strategy, Kajita et al. 2003). A CoP shift under the weight ``m g`` is the ankle
@@ -67,7 +73,10 @@ class AnkleBalance:
     servo targets move its foot by the shift relative to the pelvis (the least-squares joint
     offsets through the leg's Jacobian at the target, the foot's orientation kept). The shift
     persists on one foot (the stance leg holds it; the swing foot, shifted too, still goes where
-    it was planned in the world) and is integrated again on two.
+    it was planned in the world) and is integrated again on two. On one foot the stance ankle's
+    offsets also integrate the error between the commanded CoP (the planned CoM's place on the
+    sole plus ``dp``) and the foot's measured one (:class:`~executive.execution.cop_tracking.CoPTracking`):
+    a servo that gives under the load still presses the CoP the law asks for.
 
     Args:
         world: the truth world (its model: robot mass, gravity, feet, legs, floor).
@@ -77,6 +86,10 @@ class AnkleBalance:
             pendulum's own rate).
         integral: the rate over ``omega`` at which the CoM error on two feet shifts the pelvis
             (0: no shift).
+        estimate_rate: the rate over ``omega`` at which the CoM estimate follows the error its
+            feet's CoP shows.
+        cop_rate: the rate over ``omega`` at which the stance ankle's offsets integrate the CoP
+            error (0: no CoP tracking).
 
     Raises:
         ValueError: when a foot has fewer than two servoed leg hinges.
@@ -89,6 +102,8 @@ class AnkleBalance:
         kp: FloatArray,
         convergence: float = 1.0,
         integral: float = 0.25,
+        estimate_rate: float = 1.0,
+        cop_rate: float = 1.0,
     ) -> None:
         model = world.model
         self.model = model
@@ -107,6 +122,8 @@ class AnkleBalance:
         self.size = len(actuators)
         self.ankles = {side: self._ankle(world, side, body, servo) for side, body in self.feet.items()}
         self.integral = integral
+        self.estimate = CoMEstimate(world, estimate_rate)
+        self.cop = CoPTracking(world, self.ankles, self.kp, cop_rate)
         self.legs = {
             side: [
                 (servo[j], int(model.jnt_dofadr[j]))
@@ -183,8 +200,7 @@ class AnkleBalance:
             shares[1] = 1.0 - shares[0]
         omega = math.sqrt(self.gravity / max(float(target.com[2]) - self.floor_z, 1e-3))
         planned = target.com[:2] - shares @ planned_soles + target.com_velocity / omega
-        mujoco.mj_subtreeVel(self.model, data)
-        com, velocity = data.subtree_com[self.base], data.subtree_linvel[self.base]
+        com, velocity = self.estimate.update(data, omega)
         measured = com[:2] - shares @ self._soles(data, support)
         xi = measured + velocity[:2] / omega
         shift = (1.0 + self.convergence) * (xi - planned)
@@ -193,20 +209,26 @@ class AnkleBalance:
         for side, share in zip(support, shares, strict=True):
             for index, joint in self.ankles[side]:
                 out[index] = share * float(data.xaxis[joint] @ moment) / self.kp[index]
-        self._integrate(data.time, omega, support, measured - (target.com[:2] - shares @ planned_soles))
+        dt = self._integrate(data.time, omega, support, measured - (target.com[:2] - shares @ planned_soles))
         if self.integral > 0.0:
             self._shift_pelvis(out)
+        if self.cop.rate > 0.0:
+            stance = support[0] if len(support) == 1 else None
+            cop = target.com[:2] - planned_soles[0] + self._soles(data, support)[0] + shift
+            out += self.cop.update(data, stance, cop if stance else None, omega, dt)
         return out
 
-    def _integrate(self, time: float, omega: float, support: Sequence[str], error: FloatArray) -> None:
+    def _integrate(self, time: float, omega: float, support: Sequence[str], error: FloatArray) -> float:
         """On two feet, add this period's CoM ``error`` (m) to the pelvis shift; a clock that went
-        back (a new run) starts it from zero."""
+        back (a new run) starts it and the CoP tracking from zero. Returns the period (s)."""
         if self._time is None or time < self._time:
             self.shift[:] = 0.0
+            self.cop.reset()
             self._time = time
         dt, self._time = min(time - self._time, 0.1), time
         if len(support) == 2:
             self.shift += self.integral * omega * dt * error
+        return dt
 
     def _shift_pelvis(self, out: FloatArray) -> None:
         """Add to ``out`` every leg's joint offsets that move its foot by :attr:`shift` relative to

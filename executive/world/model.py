@@ -18,6 +18,7 @@ free joint per object), under the profile's keyframe name, with the profile's
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Literal
@@ -189,6 +190,19 @@ class World:
     @property
     def robot_mass(self) -> float:
         return float(self.model.body_subtreemass[self.ids.base_body])
+
+    def own_model(self) -> mujoco.MjModel:
+        """The model the robot knows itself by: this world's model with the truth's CoM error
+        (``perturbation.com_offset``, a model error the robot does not know) undone, as the
+        estimate's. A copy; the world's model itself when it has no such error."""
+        dx, dy = self.perturbation.com_offset
+        if (dx, dy) == (0.0, 0.0):
+            return self.model
+        model = copy.copy(self.model)
+        torso = self.ids.torso_body
+        scale = float(model.body_subtreemass[self.ids.base_body] / model.body_mass[torso])
+        model.body_ipos[torso, :2] -= (dx * scale, dy * scale)  # undoes _shift_torso_com
+        return model
 
     @property
     def base_qpos(self) -> slice:
