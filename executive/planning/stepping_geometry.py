@@ -22,6 +22,7 @@ __all__ = [
     "foot_pose",
     "foothold_of",
     "stance_footholds",
+    "stance_of",
     "stance_offsets",
     "yaw_of",
     "yaw_quat",
@@ -112,3 +113,26 @@ def stance_footholds(x: float, y: float, yaw: float, offsets: Mapping[str, Footh
         )
         for side, o in offsets.items()
     }
+
+
+def stance_of(
+    footholds: Mapping[str, Foothold], offsets: Mapping[str, Foothold]
+) -> tuple[float, float, float]:
+    """Where the pelvis stands over ``footholds`` (x, y (m), yaw (rad)) when the feet stand as
+    ``offsets`` puts them about it: :func:`stance_footholds` inverted (the heading the feet's
+    mean, the position their mean, each less its offset).
+
+    Args:
+        footholds: the feet's footholds (world), by side.
+        offsets: each foot in the pelvis's floor frame (:func:`stance_offsets`), by side.
+
+    Returns:
+        The pelvis's x, y and heading.
+    """
+    sides = [side for side in footholds if side in offsets]
+    turns = [math.remainder(footholds[side].yaw - offsets[side].yaw, 2 * math.pi) for side in sides]
+    yaw = math.atan2(sum(math.sin(t) for t in turns), sum(math.cos(t) for t in turns))
+    c, s = math.cos(yaw), math.sin(yaw)
+    xs = [footholds[side].x - (c * offsets[side].x - s * offsets[side].y) for side in sides]
+    ys = [footholds[side].y - (s * offsets[side].x + c * offsets[side].y) for side in sides]
+    return sum(xs) / len(sides), sum(ys) / len(sides), yaw

@@ -17,15 +17,18 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import mujoco
+
 from executive.planning.plan import CompositionConfig, Step
+from executive.planning.stepping_geometry import foothold_of, stance_of, stance_offsets, yaw_of
 from executive.schema.types import SceneConfig
 from executive.schema.yaml_nodes import Node
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict
 from executive.world.model import World
 
-__all__ = ["STANCE_TOLERANCE", "StepKind", "StepTask"]
+__all__ = ["STANCE_TOLERANCE", "StepKind", "StepTask", "feet_stance"]
 
-#: m: how far the pelvis may end from its goal stance (a walk's steps are placed open loop).
+#: m: how far the feet's stance may end from its goal (a walk's steps are placed open loop).
 STANCE_TOLERANCE = 0.05
 #: m: the farthest goal a step task may name from the origin (a walk is at most a few metres).
 TO_MAX = 5.0
@@ -76,19 +79,48 @@ class StepKind(TaskKind):
         return [Step("step", f"{alternative}.walk", lead, stance=(*task.stance, task.yaw_rad))]
 
     def verify(self, task: Task, world: World, detector: object) -> Verdict | None:
-        """The pelvis where the robot now stands, against the goal: event ``stood``, or a failure."""
+        """The stance the robot's feet now stand in, against the goal: event ``stood``, or a failure.
+
+        The stance is where the pelvis stands over the feet as the keyframe puts the feet about it
+        (:func:`~executive.planning.stepping_geometry.stance_of`), not the pelvis itself: the
+        balance feedback shifts the pelvis over the feet by as much as the robot's CoM is off its
+        model (docs/stepping.md).
+        """
         assert isinstance(task, StepTask)
         robot = getattr(detector, "world", None)
         if robot is None:
             return None
-        x, y = (float(v) for v in robot.data.xpos[robot.ids.base_body][:2])
+        x, y = feet_stance(robot)
+        px, py = (float(v) for v in robot.data.xpos[robot.ids.base_body][:2])
         error = math.hypot(x - task.stance[0], y - task.stance[1])
-        fields = {"pelvis": [round(x, 4), round(y, 4)], "stance_error_m": round(error, 4)}
+        fields = {
+            "stance": [round(x, 4), round(y, 4)],
+            "pelvis": [round(px, 4), round(py, 4)],
+            "stance_error_m": round(error, 4),
+        }
         if error <= STANCE_TOLERANCE:
             return Verdict(True, "stood", fields)
         limit = f"tolerance {STANCE_TOLERANCE * 100:.0f} cm"
-        detail = f"the pelvis stands {error * 100:.1f} cm from its goal ({limit})"
+        detail = f"the robot's feet stand {error * 100:.1f} cm from the goal stance ({limit})"
         return Verdict(False, "failure", {**fields, "mode": "tracking", "detail": detail})
 
     def moved_objects(self, task: Task) -> tuple[str, ...]:
         return ()
+
+
+def feet_stance(world: World) -> tuple[float, float]:
+    """Where the pelvis of ``world``'s robot stands over its feet (x, y, m) as its keyframe puts the
+    feet about the pelvis: the stance its feet stand in, whatever the pelvis leans over them."""
+    model, ids = world.model, world.ids
+    feet = {side: int(model.body(foot.body).id) for side, foot in world.profile.feet.items()}
+    home = mujoco.MjData(model)
+    home.qpos[:] = world.home_qpos()
+    mujoco.mj_kinematics(model, home)
+    offsets = stance_offsets(
+        home.xpos[ids.base_body][:2],
+        yaw_of(home.xquat[ids.base_body]),
+        {side: foothold_of(home, side, body) for side, body in feet.items()},
+    )
+    now = {side: foothold_of(world.data, side, body) for side, body in feet.items()}
+    x, y, _ = stance_of(now, offsets)
+    return x, y
