@@ -191,12 +191,16 @@ class AnkleReserveLimit(mink.Limit):
     reserve: ``dq <= gain (upper - reserve - q)`` and ``-dq <= gain (q - lower - reserve)``. A hinge
     that starts inside the reserve (a foot put down with its ankle there) moves out at most
     ``recovery`` (rad) per step, as :class:`~executive.planning.stepping_knees.KneeBendLimit`.
-    Set :attr:`support` to the feet on the floor before each phase.
+    Set :attr:`support` to the feet on the floor before each phase. A hinge's reserve is its CoP
+    part plus its rate times :attr:`shift` (the pelvis shift kept room for); with :attr:`active`
+    False the limit is off (no rows).
 
     Args:
         model: the robot's model.
         ankles: each foot's ankle hinges (:func:`find_ankles`).
-        reserves: joint id -> reserve (rad) (:func:`balance_reserves`).
+        cop: joint id -> the CoP part of its reserve (rad) (:func:`balance_reserves`, no shift).
+        rates: joint id -> its share of a pelvis shift (rad/m).
+        shift: the pelvis shift (m) the reserves keep room for.
         gain: the fraction of its slack a hinge may close per step.
         recovery: rad a hinge inside its reserve moves out per step at most.
     """
@@ -205,24 +209,41 @@ class AnkleReserveLimit(mink.Limit):
         self,
         model: mujoco.MjModel,
         ankles: Mapping[str, Sequence[AnkleHinge]],
-        reserves: Mapping[int, float],
+        cop: Mapping[int, float],
+        rates: Mapping[int, float],
+        shift: float,
         gain: float = 0.5,
         recovery: float = 0.005,
     ) -> None:
         self.nv = model.nv
         self.ankles = {side: [h for h in hinges if np.isfinite(h.lower)] for side, hinges in ankles.items()}
-        self.reserves = dict(reserves)
+        self.cop, self.rates = dict(cop), dict(rates)
+        self.shift = float(shift)
+        self.active = True
         self.gain, self.recovery = float(gain), float(recovery)
         self.support: tuple[str, ...] = ()
 
+    @property
+    def reserves(self) -> dict[int, float]:
+        """joint id -> its reserve (rad) now (0 everywhere while not :attr:`active`)."""
+        return {
+            j: (self.cop.get(j, 0.0) + self.rates.get(j, 0.0) * self.shift) if self.active else 0.0
+            for j in set(self.cop) | set(self.rates)
+        }
+
     def bounds(self, hinge: AnkleHinge) -> tuple[float, float]:
         """The hinge's range shrunk by its reserve (rad)."""
-        reserve = min(self.reserves.get(hinge.joint_id, 0.0), 0.5 * (hinge.upper - hinge.lower))
+        j = hinge.joint_id
+        reserve = self.cop.get(j, 0.0) + self.rates.get(j, 0.0) * self.shift if self.active else 0.0
+        reserve = min(reserve, 0.5 * (hinge.upper - hinge.lower))
         return hinge.lower + reserve, hinge.upper - reserve
 
     def binding(self, q: FloatArray, support: Sequence[str]) -> list[str]:
         """The ankle hinges of ``support`` at their reserve's bound (not at their range's), named."""
-        out = []
+        out: list[str] = []
+        if not self.active:
+            return out
+        reserves = self.reserves
         for hinge in (h for side in support for h in self.ankles.get(side, ())):
             lower, upper = self.bounds(hinge)
             angle = float(q[hinge.qadr])
@@ -230,7 +251,7 @@ class AnkleReserveLimit(mink.Limit):
                 for bound in (
                     b for b, at in ((lower, angle <= lower + _SLACK), (upper, angle >= upper - _SLACK)) if at
                 ):
-                    reserve = self.reserves.get(hinge.joint_id, 0.0)
+                    reserve = reserves.get(hinge.joint_id, 0.0)
                     out.append(
                         f"joint '{hinge.joint}' at its balance reserve ({bound:.2f} rad, {reserve:.3f} rad "
                         "inside its range)"
@@ -239,7 +260,7 @@ class AnkleReserveLimit(mink.Limit):
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt  # a position limit, like mink's ConfigurationLimit
-        hinges = [h for side in self.support for h in self.ankles.get(side, ())]
+        hinges = [h for side in self.support for h in self.ankles.get(side, ())] if self.active else []
         G = np.zeros((2 * len(hinges), self.nv))
         slack = np.zeros(2 * len(hinges))
         q = configuration.q
@@ -254,8 +275,8 @@ class AnkleReserveLimit(mink.Limit):
 def reserve_limit(
     world: World, feet: Mapping[str, int], soles: Mapping[str, Sequence[int]], sigmas: float
 ) -> AnkleReserveLimit:
-    """The :class:`AnkleReserveLimit` of ``world``'s robot, its reserves measured at the keyframe
-    with a pelvis shift of ``sigmas`` times the scenario's ``uncertainty.com``.
+    """The :class:`AnkleReserveLimit` of ``world``'s robot, its reserves measured at the keyframe,
+    keeping room for a pelvis shift of ``sigmas`` times the scenario's ``uncertainty.com``.
 
     Args:
         world: the (estimate) world planned on.
@@ -268,9 +289,10 @@ def reserve_limit(
     data = mujoco.MjData(model)
     data.qpos[:] = world.home_qpos()
     mujoco.mj_kinematics(model, data)
-    shift = sigmas * world.scenario.uncertainty.com
-    reserves = balance_reserves(model, data, ankles, feet, legs, soles, world.ids.base_body, shift)
-    return AnkleReserveLimit(model, ankles, reserves)
+    cop = balance_reserves(model, data, ankles, feet, legs, soles, world.ids.base_body, 0.0)
+    per_metre = balance_reserves(model, data, ankles, feet, legs, soles, world.ids.base_body, 1.0)
+    rates = {j: per_metre[j] - cop[j] for j in cop}
+    return AnkleReserveLimit(model, ankles, cop, rates, sigmas * world.scenario.uncertainty.com)
 
 
 def waist_roll(model: mujoco.MjModel, home: FloatArray, base_body: int, waist: Sequence[str]) -> str | None:

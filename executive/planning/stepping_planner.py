@@ -112,6 +112,10 @@ class StepPlanner:
             The step's plan: its five phases (shift, lift, swing, touchdown, shift_back) and the
             footholds.
 
+        The support ankles keep their balance reserve (``StepConfig.balance_reserve``); a step
+        that cannot keep it whole (a phase binds on it) is planned again keeping the CoP's part of
+        it alone, then without it, as steps were before there was one.
+
         Raises:
             PlanningInputError: on a start of the wrong shape, a side the robot does not have or
                 a target that is not finite.
@@ -119,6 +123,26 @@ class StepPlanner:
                 or its timed trajectory breaks a limit.
         """
         started = time.perf_counter()
+        limit = self.ik.ankle_limit
+        if limit is None:
+            return self._plan_step(q_start, swing, target, started)
+        full = limit.shift
+        tries = [(True, full), (True, 0.0), (False, 0.0)] if full > 0.0 else [(True, 0.0), (False, 0.0)]
+        try:
+            for active, shift in tries[:-1]:
+                limit.active, limit.shift = active, shift
+                try:
+                    return self._plan_step(q_start, swing, target, started)
+                except StepPlanningError as exc:
+                    if not any("balance reserve" in bind for bind in exc.binds):
+                        raise
+            limit.active, limit.shift = tries[-1]
+            return self._plan_step(q_start, swing, target, started)
+        finally:
+            limit.active, limit.shift = True, full
+
+    def _plan_step(self, q_start: FloatArray, swing: str, target: Foothold, started: float) -> StepPlan:
+        """:meth:`plan_step` with the ankle reserve as it is set (``started``: its clock)."""
         stance = self._check(q_start, swing, target)
         start = self.footholds(q_start)
         data, c = self.configuration.data, self.config
