@@ -308,14 +308,14 @@ def _stance_after(
     alternatives: list[AlternativeRisk],
     q_start: FloatArray | None,
 ) -> FloatArray | None:
-    """After a task that walks (its kind ``moves_base``), the start of the next: where the chosen
-    walk ends, the estimate's base put there; else ``q_start`` as it was."""
+    """After a task that walks (its kind ``moves_base``, or its chosen alternative walks), the start
+    of the next: where the chosen plan ends, the estimate's base put there; else ``q_start``."""
     from executive.report.plots import chosen_index
     from executive.tasks.registry import get as task_kind
 
     chosen = chosen_index(alternatives, scenario.risk.ordering)
     plan = alternatives[chosen].plan if chosen is not None else None
-    if not task_kind(task.kind).moves_base or plan is None:
+    if plan is None or not (task_kind(task.kind).moves_base or any(plan.walks.values())):
         return q_start
     end = plan.ordered_trajectories()[-1].qpos[-1].copy()
     world.data.qpos[world.base_qpos] = end[world.base_qpos]
