@@ -614,7 +614,10 @@ def _add_fidelity(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--out", metavar="DIR", help="suite folder (default runs/<timestamp>-<scenario>-fidelity)")
     p.add_argument("--seed", type=_SEED, default=None, help="seed of the variants (default: trials.seed)")
     p.add_argument(
-        "--rollouts", type=_ROLLOUTS, default=0, help="risk.rollouts.count of every variant (0: off)"
+        "--rollouts",
+        type=_ROLLOUTS,
+        default=0,
+        help="risk.rollouts.count of every variant (default 0: off, whatever the scenario says)",
     )
     p.add_argument("--resume", action="store_true", help="complete the suite in --out DIR")
     p.set_defaults(func=_cmd_fidelity)
