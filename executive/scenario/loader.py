@@ -400,6 +400,9 @@ def with_threshold(scenario: Scenario, threshold: float | None, source: str = "-
         threshold: the new threshold, in the units of ``risk.ordering``.
         source: what gave the value, for the message (a command-line option).
 
+    Returns:
+        A copy of ``scenario`` with the new threshold (``scenario`` itself for None).
+
     Raises:
         ScenarioError: a threshold out of that range, naming ``source`` and ``risk.threshold``.
     """
