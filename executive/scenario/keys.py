@@ -18,7 +18,7 @@ from executive.risk.orderings import ordering_names
 from executive.robot.profile import load_profile
 from executive.schema import catalog
 from executive.schema import ranges as R
-from executive.schema.declarations import Block, Choice, Integer, Key, Number, Text, Vector
+from executive.schema.declarations import Block, Choice, Integer, Key, Number, Text, Vector, nullable
 from executive.schema.failure_modes import canonical_mode, failure_modes, mode_names
 from executive.schema.scene_keys import SCENE
 from executive.schema.types import (
@@ -59,7 +59,6 @@ class Described(Key):
 
     description: str
     schema: Any
-    kind: str = ""
     unit: str = ""
 
     def read(self, node: Node) -> Any:
@@ -68,27 +67,23 @@ class Described(Key):
     def value_schema(self) -> dict[str, Any]:
         return dict(self.schema())
 
-    def type_text(self) -> str:
-        return self.kind
-
 
 def _robot_schema() -> dict[str, Any]:
     """A bundled robot's name (one that ships its model), or ``{name | profile, mjcf}``."""
     robots = catalog.list_robots()
     modelled = [n for n in robots if load_profile(catalog.robot_profile_path(n)).mjcf is not None]  # type: ignore[arg-type]
     unmodelled = [n for n in robots if n not in modelled]
-    words = {
-        "name": "a bundled robot's profile",
-        "profile": "a bundled robot's name or a profile file (relative to the scenario's folder)",
-        "mjcf": "the robot's MJCF model file (relative to the scenario's folder); a profile that ships "
-        "no model needs it",
+    keys = {
+        "name": Choice("a bundled robot, its profile and model", robots),
+        "profile": Text("a bundled robot's name or a profile file (relative to the scenario's folder)"),
+        "mjcf": Text(
+            "the robot's MJCF model file (relative to the scenario's folder); needed with a profile that "
+            "ships no model"
+        ),
     }
-    properties: dict[str, Any] = {
-        "name": {"description": words["name"], "type": ["string", "null"], "enum": [*robots, None]},
-        "profile": {"description": words["profile"], "type": ["string", "null"], "pattern": "\\S"},
-        "mjcf": {"description": words["mjcf"], "type": ["string", "null"], "pattern": "\\S"},
-    }
+    properties = {key: nullable(spec.json_schema()) for key, spec in keys.items()}
     mapping: dict[str, Any] = {
+        "title": "a robot's profile (a bundled robot's, or a file) and optionally its MJCF model",
         "type": "object",
         "properties": properties,
         "additionalProperties": False,
@@ -108,7 +103,6 @@ ROBOT = Described(
     "for any MJCF model and a profile (a bundled robot's name or a file); paths are relative to the "
     "scenario's folder",
     _robot_schema,
-    "name or mapping",
 )
 
 
@@ -263,9 +257,6 @@ class ModeWeights(Key):
     def range_text(self) -> str:
         return f"each {self.value.range_text()}"
 
-    def type_text(self) -> str:
-        return "mapping"
-
     def to_yaml(self, value: Any) -> Any:
         return dict(value)
 
@@ -304,25 +295,37 @@ class ModeSeverities(Key):
     def value_schema(self) -> dict[str, Any]:
         default = Severity()
         properties = _mode_properties(self.value, {m.name: default.of(m.name) for m in failure_modes()})
-        properties["body_parts"] = {
-            "description": f"{self.part.description}. Range: each {self.part.range_text()}. Default: "
-            + ", ".join(f"{name} {factor:g}" for name, factor in default.body_parts)
-            + ".",
-            "type": "object",
-            "propertyNames": {"pattern": "\\S"},
-            "additionalProperties": self.part.value_schema(),
-            "default": dict(default.body_parts),
-        }
+        parts = _BodyParts(self.part.description, self.part).json_schema(dict(default.body_parts))
+        properties["body_parts"] = parts
         return {"type": "object", "properties": properties, "additionalProperties": False}
 
     def range_text(self) -> str:
         return f"each {self.value.range_text()}"
 
-    def type_text(self) -> str:
-        return "mapping"
-
     def to_yaml(self, value: Any) -> Any:
         return {**dict(value.modes), "body_parts": dict(value.body_parts)}
+
+
+@dataclasses.dataclass(frozen=True)
+class _BodyParts(Key):
+    """``risk.severity.body_parts``: body part -> factor (read by :class:`ModeSeverities`)."""
+
+    description: str
+    value: Number
+    unit: str = ""
+
+    def read(self, node: Node) -> Any:
+        raise TypeError(f"{node.path}: read by ModeSeverities")
+
+    def value_schema(self) -> dict[str, Any]:
+        return {
+            "type": "object",
+            "propertyNames": {"pattern": "\\S"},
+            "additionalProperties": self.value.value_schema(),
+        }
+
+    def range_text(self) -> str:
+        return f"each {self.value.range_text()}"
 
 
 def _check_grasp(node: Node, config: GraspRiskConfig) -> GraspRiskConfig:
@@ -519,7 +522,6 @@ SCENARIO = Block(
             "the tasks, in order: each a mapping with one key, its kind ({transfer: {...}}), or "
             "{kind: NAME-OR-package.module:Class, ...its keys}",
             _mission_schema,
-            "list",
         ),
         "trials": TRIALS,
     },

@@ -89,27 +89,37 @@ class Key(abc.ABC):
         """The range as the docs write it (``[0, 0.2]``, ``(0, 1]``); "" for none."""
         return ""
 
-    def type_text(self) -> str:
-        """The value's type in a word or two (``number``, ``list of 3 numbers``)."""
-        return ""
-
     def to_yaml(self, value: Any) -> Any:
         """A read value (a default) as the file writes it (an angle back in degrees, a tuple as a list)."""
         return value
 
     def json_schema(self, default: Any = dataclasses.MISSING) -> dict[str, Any]:
-        """The value's JSON Schema with its description (unit, range and ``default`` said in words too)."""
-        schema = self.value_schema()
-        words = [self.description.rstrip(".") + "."]
+        """The value's JSON Schema, described: ``title`` (the words), ``description`` (the words,
+        unit, range and default, for an editor's hover), ``x-unit`` and ``x-range`` (for the docs)."""
+        title = self.description.rstrip(".")
+        words = [title + "."]
+        notes: dict[str, Any] = {}
         if self.unit:
             words.append(f"Unit: {self.unit}.")
-            schema["x-unit"] = self.unit
+            notes["x-unit"] = self.unit
         if self.range_text():
             words.append(f"Range: {self.range_text()}.")
+            notes["x-range"] = self.range_text()
         if default is not dataclasses.MISSING:
-            schema["default"] = default
+            notes["default"] = _json_value(default)
             words.append(f"Default: {_default_text(default)}.")
-        return {"description": " ".join(words), **schema}
+        return {"title": title, "description": " ".join(words), **notes, **self.value_schema()}
+
+
+def _json_value(value: Any) -> Any:
+    """``value`` with its integral floats as ints, inside lists and mappings too."""
+    if isinstance(value, float):
+        return json_number(value)
+    if isinstance(value, list | tuple):
+        return [_json_value(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _json_value(v) for k, v in value.items()}
+    return value
 
 
 def _default_text(value: Any) -> str:
@@ -161,9 +171,6 @@ class Number(Key):
             return f"<= {number_text(high)}"
         return f"{'(' if self.open_low else '['}{number_text(low)}, {number_text(high)}]"
 
-    def type_text(self) -> str:
-        return "number"
-
     def to_yaml(self, value: Any) -> Any:
         return json_number(round(math.degrees(value), 2) if self.to_radians else value)
 
@@ -205,9 +212,6 @@ class Integer(Key):
             return f">= {self.low}" if self.low is not None else ""
         return f"[{self.low}, {self.high}]" if self.low is not None else f"<= {self.high}"
 
-    def type_text(self) -> str:
-        return "integer"
-
 
 @dataclasses.dataclass(frozen=True)
 class Choice(Key):
@@ -227,9 +231,6 @@ class Choice(Key):
     def value_schema(self) -> dict[str, Any]:
         return {"type": "string", "enum": list(self.names())}
 
-    def type_text(self) -> str:
-        return " \\| ".join(f"`{name}`" for name in self.names())
-
 
 @dataclasses.dataclass(frozen=True)
 class Text(Key):
@@ -245,9 +246,6 @@ class Text(Key):
     def value_schema(self) -> dict[str, Any]:
         # Not blank: some character that is not white space.
         return {"type": "string"} if self.allow_empty else {"type": "string", "pattern": "\\S"}
-
-    def type_text(self) -> str:
-        return "string"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -292,9 +290,6 @@ class Vector(Key):
         names = self.names or tuple(f"[{i}]" for i in range(len(self.items)))
         return ", ".join(f"{name} {text}" for name, text in zip(names, ranges, strict=True))
 
-    def type_text(self) -> str:
-        return f"list of {' or '.join(str(n) for n in self.lengths)} numbers"
-
     def to_yaml(self, value: Any) -> Any:
         return [self._item(i).to_yaml(v) for i, v in enumerate(value)]
 
@@ -322,9 +317,6 @@ class Either(Key):
     def range_text(self) -> str:
         return self.one.range_text()
 
-    def type_text(self) -> str:
-        return f"number or {self.many.type_text()}"
-
 
 @dataclasses.dataclass(frozen=True)
 class Alternatives(Key):
@@ -347,9 +339,6 @@ class Alternatives(Key):
         item = {"type": "string", "enum": list(self.names)}
         return {"type": "array", "items": item, "minItems": 1, "uniqueItems": True}
 
-    def type_text(self) -> str:
-        return "list of " + ", ".join(f"`{name}`" for name in self.names)
-
     def to_yaml(self, value: Any) -> Any:
         return list(value)
 
@@ -371,9 +360,6 @@ class ListOf(Key):
         if self.min_len:
             schema["minItems"] = self.min_len
         return schema
-
-    def type_text(self) -> str:
-        return "list"
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -458,6 +444,3 @@ class Block(Key):
         if self.conditions:
             schema["allOf"] = list(self.conditions)
         return schema
-
-    def type_text(self) -> str:
-        return "mapping"
