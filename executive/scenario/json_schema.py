@@ -48,6 +48,11 @@ LOADER_ONLY: tuple[tuple[str, str], ...] = (
         "a key given twice is refused; a YAML parser keeps the last one before any schema sees the document",
     ),
     (
+        "whole numbers",
+        "an integer (a count, a seed) written with a decimal point, `3.0`, is refused; JSON Schema "
+        "counts 3.0 as an integer",
+    ),
+    (
         "finite numbers",
         "NaN (a validator's comparisons with it are all false) and infinity where a key has no upper "
         "bound (`risk.threshold`) are refused",
