@@ -14,10 +14,12 @@ import jsonschema
 import pytest
 import yaml
 
+from executive.risk.orderings import ordering_names
 from executive.scenario import loader
 from executive.scenario.json_schema import built_in_kinds, scenario_schema
-from executive.tasks import registry
 from executive.schema import yaml_nodes
+from executive.schema.failure_modes import failure_modes
+from executive.tasks import registry
 from executive.tasks.base import TaskKind
 
 
@@ -33,13 +35,16 @@ def parse(text: str) -> Any:
     """The document ``text`` as an editor validates it (raises yaml.YAMLError when it cannot)."""
     return yaml.load(text, Loader=EditorLoader)  # a SafeLoader: safe
 
-_validators: dict[tuple[tuple[str, int], ...], jsonschema.Draft202012Validator] = {}
+
+_validators: dict[tuple[object, ...], jsonschema.Draft202012Validator] = {}
 
 
 def validator(kinds: list[TaskKind] | None = None) -> jsonschema.Draft202012Validator:
-    """A validator of the schema with ``kinds`` (None: the built-in kinds), made once per set of kinds."""
+    """A validator of the schema with ``kinds`` (None: the built-in kinds), made once per set of kinds
+    and of the registries the schema names (orderings, failure modes: a test may add one)."""
     kinds = built_in_kinds() if kinds is None else kinds
-    key = tuple(sorted((kind.name, id(type(kind))) for kind in kinds))
+    registries = (ordering_names(), tuple((m.name, m.aliases) for m in failure_modes()))
+    key = (tuple(sorted((kind.name, id(type(kind))) for kind in kinds)), registries)
     if key not in _validators:
         schema = scenario_schema(sorted(kinds, key=lambda kind: kind.name))
         jsonschema.Draft202012Validator.check_schema(schema)
