@@ -264,6 +264,8 @@ def control_loop(
                 detail = entry.get("reason") or entry.get("alternative") or entry.get("outcome") or ""
                 print(f"[{entry['at']}] {entry['kind']}: {detail}", flush=True)
         seen = len(executive.log.entries)
+        if phase == "executing" and int(mirror.time) != int(mirror.time - 1.0 / CONTROL_HZ):
+            print(f"[robot {mirror.time:.0f} s] {executive.describe()}", flush=True)  # once a second
     return tick_ms
 
 
@@ -287,6 +289,7 @@ def run(args: argparse.Namespace) -> HostRun:
     channel = CallbackChannel(approver, name="host-robot")
     executive = Executive(scenario, approval=channel, robot=mirror, out=args.out)
     freeze_startup_heap()  # built once: keep the full garbage collections out of the loops
+    switch = sys.getswitchinterval()
     sys.setswitchinterval(0.0005)  # the servo thread gets the interpreter within 0.5 ms of a tick's
     holding = lambda: _phase(executive) in ("planning", "awaiting_approval")  # noqa: E731
     pace = Lockstep(SERVO_HZ // CONTROL_HZ, holding) if args.fast else WallClock()
@@ -309,6 +312,7 @@ def run(args: argparse.Namespace) -> HostRun:
         servo.join()
         for sig, handler in previous.items():
             signal.signal(sig, handler)
+        sys.setswitchinterval(switch)
     stopped_by = stop_requested[0] if stop_requested else None
     return HostRun(executive, robot, tick_ms, dict(pace.late), drift, stopped_by)
 
@@ -336,16 +340,18 @@ def report(result: HostRun) -> None:
         )
 
 
-def main(argv: list[str] | None = None) -> int:
+def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("scenario", nargs="?", default="book_transfer", help="a bundled name or a file")
-    parser.add_argument(
-        "--threshold", type=float, help="override risk.threshold (lower: the approver is asked)"
-    )
+    parser.add_argument("--threshold", type=float, help="override risk.threshold (lower: approval asked)")
     parser.add_argument("--rollouts", type=int, help="override risk.rollouts.count (0: the dry runs only)")
     parser.add_argument("--out", help="the run folder (decisions.jsonl, summary.json)")
     parser.add_argument("--fast", action="store_true", help="lockstep, not the wall clock's pace")
-    result = run(parser.parse_args(argv))
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    result = run(build_parser().parse_args(argv))
     report(result)
     return 0 if result.executive.outcome == "success" else 1
 
