@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from executive.errors import ExecutiveError
 from executive.tasks.base import TaskKind
 
 __all__ = ["add_parser", "run"]
@@ -26,11 +27,23 @@ def run(args: argparse.Namespace) -> int:
     kinds, problems = available_kinds()
     for problem in problems:
         print(f"executive schema: warning: left out: {problem}", file=sys.stderr)
-    named: list[TaskKind] = [get(path, allow_modules=[path.partition(":")[0]]) for path in args.kind]
+    named: list[TaskKind] = [get(path, allow_modules=[_module(path)]) for path in args.kind]
     by_name = {kind.name: kind for kind in [*kinds, *named]}
     schema = scenario_schema([by_name[name] for name in sorted(by_name)])
     sys.stdout.write(schema_markdown(schema) if args.markdown else schema_text(schema))
     return 0
+
+
+def _module(path: str) -> str:
+    """The module of ``--kind package.module:Class`` (named on the command line: allowed to import).
+
+    Raises:
+        ExecutiveError: not of that form (dotted Python identifiers, a colon, a class name).
+    """
+    module, colon, name = path.partition(":")
+    if not colon or not name.isidentifier() or not all(p.isidentifier() for p in module.split(".")):
+        raise ExecutiveError(f"--kind {path!r}: expected package.module:Class")
+    return module
 
 
 def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:

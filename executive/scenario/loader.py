@@ -13,7 +13,9 @@ setting may switch a safety check off (a negative ``risk.guard.min_com_margin``,
 :func:`max_ordering_value`), ``severity.body_parts`` names a body-part label or a body of the
 robot's model, and the scene must be physically possible (:mod:`executive.scenario.checks`,
 with the robot's reach measured in its MJCF by :mod:`executive.robot.model`).
-The schema by example is the bundled ``scenarios/book_transfer.yaml``.
+Every key is declared once (:mod:`executive.scenario.keys`, :mod:`executive.schema.scene_keys`, each
+task kind's ``keys``): read with its declaration here and described from it by ``executive schema``
+(docs/scenarios.md); the schema by example is the bundled ``scenarios/book_transfer.yaml``.
 """
 
 from __future__ import annotations

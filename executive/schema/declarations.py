@@ -11,6 +11,7 @@ and ``docs/scenarios.md`` (:mod:`executive.scenario.json_schema`). The vocabular
 * :class:`Vector`: a list of numbers, each with its own range, of one of a few lengths;
 * :class:`Either`: one number or a list of them (an orientation);
 * :class:`Alternatives`: a task's list of distinct alternative names;
+* :class:`ListOf`: a list of one declaration's values (the scene's objects);
 * :class:`Block`: a mapping of declared keys, read into a dataclass whose field defaults are
   the keys' defaults (a key absent or null keeps its default).
 
