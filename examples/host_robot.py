@@ -244,7 +244,7 @@ def control_loop(
     """The 100 Hz loop: read the robot into the executive's mirror, tick; stop between two ticks
     when a signal asked. Returns each tick's duration (ms) by the phase it ticked in."""
     tick_ms: dict[str, list[float]] = {}
-    seen = 0
+    seen, shown_s = 0, -1
     while not executive.done:
         if stop_requested:
             mirror.sync()  # hold where the robot is now, not where it was a period ago
@@ -264,8 +264,9 @@ def control_loop(
                 detail = entry.get("reason") or entry.get("alternative") or entry.get("outcome") or ""
                 print(f"[{entry['at']}] {entry['kind']}: {detail}", flush=True)
         seen = len(executive.log.entries)
-        if phase == "executing" and int(mirror.time) != int(mirror.time - 1.0 / CONTROL_HZ):
-            print(f"[robot {mirror.time:.0f} s] {executive.describe()}", flush=True)  # once a second
+        if phase == "executing" and int(mirror.time) > shown_s:  # once a second of robot time
+            shown_s = int(mirror.time)
+            print(f"[robot {shown_s} s] {executive.describe()}", flush=True)
     return tick_ms
 
 

@@ -4,9 +4,10 @@ stops safely on Ctrl-C.
 The first run goes in this process in lockstep (``--fast``) with the risk threshold lowered so the
 approval callback is asked: the book must lie at its target in the robot's own simulation (the
 physics, not the executive's summary), the callback's approval logged. The second runs the example
-as a program at the wall clock's pace and sends it SIGINT once its log says the robot moves: it
-must end with exit 1, the log's last lines ``stop`` then ``end``, the summary ``aborted``, and the
-robot holding (its joints still). Each waits for the example's own lines, never for a time.
+as a program at the wall clock's pace and sends it SIGINT once it says the robot has moved for a
+second: it must end with exit 1, the log's last lines ``stop`` then ``end``, the summary
+``aborted``, and the robot holding (its joints still). Each waits for the example's own lines,
+never for a time.
 """
 
 from __future__ import annotations
@@ -72,8 +73,8 @@ def test_ctrl_c_halts_the_tree_and_the_robot_holds(tmp_path: Path) -> None:
         moving = 0
         for line in run.stdout:  # the example's own lines: an event each, no time assumed
             lines.append(line)
-            moving += line.startswith("[robot ") and "[executing]" in line  # a second of motion each
-            if moving == 2:
+            moving += line.startswith("[robot ") and "[executing]" in line  # at each robot second
+            if moving == 3:  # at least a second into the motion
                 run.send_signal(signal.SIGINT)  # Ctrl-C while the robot moves
                 break
         lines += run.stdout.readlines()

@@ -13,7 +13,6 @@ from executive.schema.declarations import Block, Choice, Either, Integer, Key, L
 from executive.schema.types import OBSTACLE_CATEGORIES, SHAPES, Body, Table
 
 __all__ = [
-    "ANGLE",
     "BODY_NAME",
     "OBJECT",
     "OBJECT_NAME",
@@ -46,8 +45,6 @@ POSITION = Vector(
     ("x", "y", "z"),
     unit="m",
 )
-#: An angle in degrees, read in radians.
-ANGLE = _DEGREES
 ORIENTATION = Either(
     "yaw in degrees, or [roll, pitch, yaw] in degrees (applied z-y-x)",
     _DEGREES,
