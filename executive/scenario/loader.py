@@ -52,7 +52,7 @@ from executive.schema.yaml_nodes import (
 )
 from executive.tasks.base import Task
 
-__all__ = ["APPROVAL_MODES", "from_dict", "load", "loads", "max_ordering_value"]
+__all__ = ["APPROVAL_MODES", "from_dict", "load", "loads", "max_ordering_value", "with_threshold"]
 
 
 T = TypeVar("T")
@@ -262,6 +262,31 @@ def _check_threshold(node: Node, risk: RiskConfig, scene: SceneConfig | None = N
             f"any alternative can have is {highest:g} ({how}), so the approval gate would never ask; "
             f"give a threshold below {highest:g}"
         )
+
+
+def with_threshold(scenario: Scenario, threshold: float | None, source: str = "--threshold") -> Scenario:
+    """``scenario`` with ``risk.threshold`` set to ``threshold`` (None: unchanged), checked as the
+    file's own value is: a finite number >= 0 and below the largest value ``risk.ordering`` can
+    take (:func:`max_ordering_value`), so an override can lower or raise the gate but never switch
+    it off.
+
+    Args:
+        scenario: a loaded scenario.
+        threshold: the new threshold, in the units of ``risk.ordering``.
+        source: what gave the value, for the message (a command-line option).
+
+    Returns:
+        A copy of ``scenario`` with the new threshold (``scenario`` itself for None).
+
+    Raises:
+        ScenarioError: a threshold out of that range, naming ``source`` and ``risk.threshold``.
+    """
+    if threshold is None:
+        return scenario
+    node = Node({"threshold": threshold}, source, "risk")
+    risk = dataclasses.replace(scenario.risk, threshold=node.get("threshold").non_negative())
+    _check_threshold(node, risk, scenario.scene)
+    return dataclasses.replace(scenario, risk=risk)
 
 
 def _check_body_parts(root: Node, scenario: Scenario, facts: RobotFacts | None) -> None:

@@ -16,7 +16,9 @@ the group ``executive.task_kinds``, or ``kind: package.module:Class`` in the YAM
 from __future__ import annotations
 
 import abc
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from executive.schema.declarations import Alternatives, Block, nullable
@@ -75,7 +77,12 @@ class TaskKind(abc.ABC):
       in (a ``place``).
 
     ``moves_base``: the task ends with the robot standing elsewhere (a ``step``); later tasks
-    plan from the stance it ends in.
+    plan from the stance it ends in. An alternative of another kind may walk too (its plan's
+    ``walks``): the same holds after it.
+
+    ``instead_of``: alternative -> the alternative it stands in for. It is planned only when that
+    one, asked for in the same planning round, cannot be planned (a transfer's side-step, where the
+    arm alone falls short); otherwise its row says it is not needed.
 
     ``keys``: the block's keys (a :class:`~executive.schema.declarations.Block`), declared once for
     :meth:`read` and :meth:`schema`; None (the default) leaves the block undescribed but for its
@@ -87,6 +94,7 @@ class TaskKind(abc.ABC):
     leaves_held: ClassVar[bool] = False
     needs_held: ClassVar[bool] = False
     moves_base: ClassVar[bool] = False
+    instead_of: ClassVar[Mapping[str, str]] = MappingProxyType({})
     keys: ClassVar[Block | None] = None
 
     @abc.abstractmethod
