@@ -22,6 +22,7 @@ from numpy.typing import NDArray
 
 from executive import __version__
 from executive.cli import replay as replay_command
+from executive.cli import schema as schema_command
 from executive.cli import tree as tree_command
 from executive.cli.output_paths import check_file, check_folder
 from executive.cli.signals import interrupted_text, interrupts_held, stop_reason, stop_signals_as_interrupt
@@ -492,8 +493,9 @@ def _parser() -> argparse.ArgumentParser:
     tree_command.add_parser(sub, _SCENARIO_HELP)
     replay_command.add_parser(sub, _PIXELS, _PORT)
     _add_console(sub)
+    schema_command.add_parser(sub)
     for name, command in sub.choices.items():
-        if name != "list":  # every command that loads a scenario
+        if name not in ("list", "schema"):  # every command that loads a scenario
             command.add_argument(
                 "--allow-module",
                 action="append",

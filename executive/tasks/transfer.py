@@ -31,12 +31,14 @@ import numpy as np
 
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import HandTarget, PlanningError
+from executive.schema.declarations import Block
+from executive.schema.scene_keys import OBJECT_NAME, TARGET, TO_YAW
 from executive.schema.types import SceneConfig
 from executive.schema.yaml_nodes import Node
 from executive.tasks import handover as handover_steps
 from executive.tasks import regrasp as regrasp_steps
 from executive.tasks import sidestep as sidestep_steps
-from executive.tasks.base import Alternative, Task, TaskKind, Verdict
+from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
 from executive.tasks.hands import ONE_HAND, HandFrames, yaw_of
 from executive.tasks.phases import one_hand_leg
 from executive.tasks.pick_place import PlaceTask, place_steps, site_offset
@@ -72,12 +74,27 @@ class TransferKind(TaskKind):
     alternative_names = (*ONE_HAND, *HANDOVERS, *REGRASPS, *SIDESTEPS)
     default_alternatives = ("left", "right", "left_to_right", *SIDESTEPS)
     instead_of = MappingProxyType(dict(sidestep_steps.SIDESTEPS))
+    keys = Block(
+        "Move an object to a target: one hand (left, right), a handover (left_to_right, "
+        "right_to_left: the object turns a half turn), a regrasp (left_regrasp_right, "
+        "right_regrasp_left: set down near the midline and picked up by the other hand) or a "
+        "side-step (left_sidestep, right_sidestep: the hand carries it through a walk; planned only "
+        "where that hand's one-arm carry cannot be)",
+        {
+            "object": OBJECT_NAME,
+            "to": TARGET,
+            "to_yaw": TO_YAW,
+            "alternatives": alternatives_key(alternative_names),
+        },
+        required=("object", "to"),
+        defaults={"alternatives": list(default_alternatives)},
+    )
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``transfer: {object, to: [x, y(, z)], to_yaw (deg), alternatives}``."""
         from executive.schema.readers import read_target
 
-        node.check_keys(("object", "to"), ("to_yaw", "alternatives"))
+        self.keys.check_keys(node)
         name, to, yaw = read_target(node, scene)
         return TransferTask(
             object=name,
