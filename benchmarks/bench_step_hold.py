@@ -6,8 +6,10 @@ on the estimate and run on the exact truth. A 0.2 s push on the pelvis (four dir
 magnitudes per robot) comes at the end of the lift, in the middle of the swing or in the
 touchdown. Per push, four runs: unguarded (the step goes on; a step that fails holds), and
 guarded with each of the Step's holds (:data:`behaviours.step.HOLDS`): ``auto``, ``freeze``,
-``plan``. Each run ends 5 s after its step did; it counts as standing when no detector fired
-and each foot carries at least a tenth of the weight.
+``plan``. Each run ends 5 s after its step did: ``both`` when no detector fired and each foot
+carries at least :data:`SHARE` of the weight (on both feet), ``one`` when no detector fired but
+a foot carries less (standing on the other), ``FALLS`` when a detector fired (a fall, or the
+tipping robot's hand on the table).
 
     python -m benchmarks.bench_step_hold [--robot humanoid|g1|both]
 
@@ -44,6 +46,8 @@ DIRECTIONS = {
     "forwards": (1, 0),
     "backwards": (-1, 0),
 }
+#: The least share of the weight each foot carries for the robot to stand on both feet.
+SHARE = 0.05
 #: When the push starts: (phase index, fraction of the phase).
 WHEN = {"lift end": (1, 0.8), "mid-swing": (2, 0.5), "touchdown": (3, 0.4)}
 
@@ -80,8 +84,9 @@ def plan_step(scenario: Scenario, dx: float) -> StepPlan:
 
 def run(
     scenario: Scenario, plan: StepPlan, hold: str | None, push: np.ndarray, at: float
-) -> tuple[bool, str]:
-    """One run (``hold`` None: unguarded): (standing on both feet at the end, how the step ended)."""
+) -> tuple[str, str, tuple[float, float]]:
+    """One run (``hold`` None: unguarded): ``both``, ``one`` or ``FALLS`` (module doc), how the step
+    ended, and the share of the weight on each foot (left, right) at the end."""
     truth = build(scenario)
     robot = SimulatedRobot(truth)
     install(robot)
@@ -97,10 +102,10 @@ def run(
             if guard.status != Status.RUNNING:
                 ended, how = robot.time, guard.feedback_message
         if robot.advance() is not None:
-            return False, robot.failure.detail if robot.failure else how
+            return "FALLS", robot.failure.detail if robot.failure else how, (0.0, 0.0)
     weight = truth.robot_mass * float(np.linalg.norm(truth.model.opt.gravity))
-    loads_ = [foot_force(robot, side)[0] for side in ("left", "right")]
-    return min(loads_) > 0.1 * weight, how
+    left, right = (foot_force(robot, side)[0] / weight for side in ("left", "right"))
+    return ("both" if min(left, right) >= SHARE else "one"), how, (left, right)
 
 
 def bench(robot: str) -> None:
@@ -110,7 +115,8 @@ def bench(robot: str) -> None:
     starts = np.cumsum([0.0] + [p.trajectory.duration for p in plan.phases])
     settings: list[str | None] = [None, *HOLDS]
     names = ["unguarded", *HOLDS]
-    stood = dict.fromkeys(names, 0)
+    both = dict.fromkeys(names, 0)
+    falls = dict.fromkeys(names, 0)
     print(
         f"\n{robot}, step {dx * 100:.0f} cm forward\n  {'push (0.2 s on the pelvis)':<50}"
         + "".join(f"{n:>11}" for n in names)
@@ -121,13 +127,14 @@ def bench(robot: str) -> None:
                 at = starts[phase] + fraction * plan.phases[phase].trajectory.duration
                 push = force * np.array([ux, uy, 0.0])
                 row = [run(scenario, plan, s, push, at)[0] for s in settings]
-                for name, ok in zip(names, row, strict=True):
-                    stood[name] += ok
+                for name, outcome in zip(names, row, strict=True):
+                    both[name] += outcome == "both"
+                    falls[name] += outcome == "FALLS"
                 label = f"{force:.0f} N {direction}, {when}"
-                cells = "".join(f"{'stands' if ok else 'FALLS':>11}" for ok in row)
-                print(f"  {label:<50}{cells}", flush=True)
+                print(f"  {label:<50}" + "".join(f"{outcome:>11}" for outcome in row), flush=True)
     total = len(magnitudes) * len(DIRECTIONS) * len(WHEN)
-    print(f"  {'standing on both feet, of ' + str(total):<50}" + "".join(f"{stood[n]:>11}" for n in names))
+    print(f"  {'on both feet, of ' + str(total):<50}" + "".join(f"{both[n]:>11}" for n in names))
+    print(f"  {'fell, of ' + str(total):<50}" + "".join(f"{falls[n]:>11}" for n in names))
 
 
 def main() -> None:
