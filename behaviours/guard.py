@@ -57,9 +57,15 @@ class GuardedMotion(Protocol):
     name: str
     status: py_trees.common.Status
     feedback_message: str
-    trajectory: Trajectory
-    support_required: bool
-    holding: bool
+
+    @property
+    def trajectory(self) -> Trajectory: ...
+
+    @property
+    def support_required(self) -> bool: ...
+
+    @property
+    def holding(self) -> bool: ...
 
     def planned_time(self, robot: Any) -> float:
         """Where the motion is along :attr:`trajectory` now (s)."""
