@@ -279,6 +279,28 @@ def test_walks_at_exact_truth_do_not_trip(mission: str, sides: tuple[str, ...]) 
     assert robot.failure is None
 
 
+def test_a_walk_carrying_an_object_is_guarded_with_it_in_hand(fall_steps: Scenario) -> None:
+    """A walk whose step carries an object (a side-step holding a book): its footsteps' guards
+    take the object as carried (on the robot's side, the hand allowed to touch it), on the walk's
+    very knots (the memo's key)."""
+    from dataclasses import replace
+
+    from executive.planning.planner import Planner
+
+    estimate = build(fall_steps)
+    plan = plan_alternative(Planner(estimate), estimate, fall_steps.mission[0], "right_first")
+    walk = plan.steps[0]
+    carrying = replace(plan, steps=(replace(walk, carried=("left", "book")),))
+    guards = [n for n in build_subtree(carrying, guard=True).iterate() if isinstance(n, RiskGuard)]
+    assert guards and all(g.motion.trajectory.carried == ("left", "book") for g in guards)
+    assert all(g.motion.trajectory.qpos is plan.trajectories[walk.name].qpos for g in guards)
+    monitor = LiveRiskMonitor(estimate, fall_steps.risk.guard)
+    allowed = guards[0].allow(monitor)
+    assert allowed and all("book" in pair for pair in allowed)  # the hand's pairs with the book
+    plain = [n for n in build_subtree(plan, guard=True).iterate() if isinstance(n, RiskGuard)]
+    assert plain[0].motion.trajectory.carried is None and plain[0].allow(monitor) == frozenset()
+
+
 def _g1_plan(g1_mjcf: Path) -> tuple[Scenario, StepPlan]:
     scene = f"""
 name: g1_floor

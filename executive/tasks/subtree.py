@@ -11,6 +11,7 @@ behaviours in ``make``.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 
 import py_trees
 
@@ -72,11 +73,14 @@ def build_subtree(
 
 def _walk(plan: AlternativePlan, step: Step, guard: bool) -> py_trees.behaviour.Behaviour:
     """A walk's footsteps in a Sequence, each following its part of the walk's trajectory (wrapped
-    in a live risk guard when ``guard``: its swing foot the guard's side)."""
+    in a live risk guard when ``guard``: its swing foot the guard's side; an object the walk
+    carries in a hand is the guard's carried object, on the robot's side)."""
     from behaviours.guard import RiskGuard
     from behaviours.step import Step as FootStep
 
     walk = plan.trajectories.get(step.name)
+    if walk is not None and step.carried is not None and walk.carried != step.carried:
+        walk = replace(walk, carried=step.carried)  # the same knots (the guards' memo key)
     children: list[py_trees.behaviour.Behaviour] = []
     starts_at = 0.0
     for k, footstep in enumerate(plan.walks[step.name]):
