@@ -151,7 +151,7 @@ class StepPlanner:
                 exc.name, f"{swing} foot step to {target.describe()}: {exc}", exc.binds, exc.iterations
             ) from exc
         footholds = dict(start) | {swing: target}
-        return StepPlan(swing, stance, tuple(phases), start, footholds, time.perf_counter() - started)
+        return StepPlan(swing, stance, tuple(phases), start, footholds, margin, time.perf_counter() - started)
 
     def _check(self, q_start: FloatArray, swing: str, target: Foothold) -> str:
         """Raise PlanningInputError on a bad request; return the stance foot's side."""
