@@ -9,6 +9,7 @@ import py_trees
 
 from behaviours.robot_access import RobotBehaviour
 from executive.planning.planner import Trajectory
+from executive.schema.types import GuardConfig
 
 __all__ = ["Carry", "Home", "Lift", "MoveHand", "Place", "Retreat"]
 
@@ -31,11 +32,17 @@ class MoveHand(RobotBehaviour):
     physics (:class:`executive.execution.simulated.SimulatedRobot`) the legs' static load of each sampled
     target (the leg servos' feed-forward) is computed with them, in one batch
     (:meth:`executive.execution.simulated.JointTargetController.leg_loads`).
+
+    A :class:`behaviours.guard.GuardedMotion`: a guard looks ahead along :attr:`trajectory` from
+    :meth:`planned_time`, with the guard's own CoM limit (:meth:`com_limit`), and stops it with
+    the plain hold (:meth:`hold_safely`).
     """
 
     chunk: int = 25  # control periods sampled ahead (0.5 s at 50 Hz)
 
     phase: str = "free"  # what the detectors are told: free / lift / carry / place
+    support_required = False  # feet without a support polygon: the CoM margin is not measured
+    holding = True  # its safe hold (hold_safely) is reached at once
 
     def __init__(
         self,
@@ -63,6 +70,19 @@ class MoveHand(RobotBehaviour):
     def started_at(self) -> float:
         """Robot time at which the trajectory started playing (its t = 0)."""
         return self._t0
+
+    def planned_time(self, robot: Any) -> float:
+        """Where the motion is along :attr:`trajectory` now (s)."""
+        return robot.time - self._t0
+
+    def com_limit(self, config: GuardConfig) -> float:
+        """The least CoM margin (m) over the foot contacts: the guard's ``min_com_margin``."""
+        return config.min_com_margin
+
+    def hold_safely(self, robot: Any, clear_ahead: bool = True) -> str:
+        """The plain hold: every joint servoed to where it is (nothing more to say: "")."""
+        robot.hold()
+        return ""
 
     def initialise(self) -> None:
         self._robot = self.robot  # the robot of this run of the motion: one blackboard read

@@ -17,6 +17,15 @@ Verdicts (the failure-mode table, :mod:`executive.schema.failure_modes`): a fall
 detector's (``fall``, from :meth:`RobotBehaviour.failed_by_detector`); a foot that does not lift,
 does not come down, or lands farther from its planned foothold than the tolerances fails with
 ``tracking`` (the robot did not follow its plan; it still stands).
+
+A :class:`behaviours.guard.RiskGuard` wraps a step as it wraps a hand motion (the step is a
+:class:`behaviours.guard.GuardedMotion`): its look-ahead runs along the walk's planned knots, its
+CoM limit is the sole's (:meth:`Step.com_limit`), a foot rolled onto an edge counts as the CoM
+outside its support, and when it trips :meth:`Step.hold_safely` puts the robot on both feet: the
+plain hold when the robot tips towards the swing foot (its two-foot feed-forward sets the foot
+down where it is), else the step's own plan back to where the foot lifted or on to its foothold,
+whichever is shorter on one foot (:mod:`executive.planning.stepping_hold`; docs/stepping.md,
+"When a guard stops a step").
 """
 
 from __future__ import annotations
@@ -32,10 +41,21 @@ from behaviours.robot_access import RobotBehaviour
 from executive.planning.limits import SupportPolygon
 from executive.planning.stepping import Foothold, StepPhase, StepPlan
 from executive.planning.stepping_geometry import yaw_of
+from executive.planning.stepping_hold import back_to_both_feet, on_to_both_feet, single_support_left
+from executive.planning.timing import Trajectory, concatenate
+from executive.schema.types import GuardConfig
 
-__all__ = ["Step", "foot_force", "foothold", "sole_gap"]
+__all__ = ["HOLDS", "Step", "foot_force", "foothold", "sole_gap"]
 
 Status = py_trees.common.Status
+
+#: How a stopped step holds (:meth:`Step.hold_safely`): ``auto`` (the rule measured safest, below),
+#: ``freeze`` (every joint where it is, as a hand motion), ``plan`` (along the plan to both feet).
+HOLDS = ("auto", "freeze", "plan")
+#: ``auto`` drops the swing foot where it is when the capture point's error from the plan lies
+#: within 60 degrees of the direction from the stance foot to the swing foot: the robot tips
+#: towards it (docs/stepping.md, "When a guard stops a step").
+_TOWARDS_SWING = math.cos(math.radians(60.0))
 
 
 def foot_force(robot: Any, side: str) -> tuple[float, bool]:
@@ -99,6 +119,9 @@ class Step(RobotBehaviour):
     swing foot after the lift), ``min_com_margin`` (m: the least distance of the truth CoM inside
     the stance sole during lift, swing and touchdown; negative outside).
 
+    As a :class:`behaviours.guard.GuardedMotion`: :attr:`trajectory`, :meth:`planned_time`,
+    :meth:`com_limit`, :attr:`support_required`, :meth:`hold_safely` and :attr:`holding`.
+
     Args:
         name: the behaviour's name.
         plan: the planned step.
@@ -110,6 +133,11 @@ class Step(RobotBehaviour):
         load_share: the share of the robot's weight the swing foot carries after the weight
             shift back (its touchdown confirmed by its load).
         settle_s: s a phase's end waits for its check.
+        walk: the planned trajectory the step is part of (a walk's footsteps end to end, as
+            :attr:`executive.planning.plan.AlternativePlan.trajectories` has it), which a guard
+            looks ahead along; None: the step's own phases, concatenated.
+        starts_at: s into ``walk`` at which this step starts.
+        hold: how a stopped step holds (:data:`HOLDS`; :meth:`hold_safely`).
     """
 
     chunk: int = 25  # control periods sampled ahead (0.5 s at 50 Hz), as MoveHand
@@ -124,8 +152,13 @@ class Step(RobotBehaviour):
         touchdown_gap: float = 0.005,
         load_share: float = 0.25,
         settle_s: float = 0.6,
+        walk: Trajectory | None = None,
+        starts_at: float = 0.0,
+        hold: str = "auto",
     ) -> None:
         super().__init__(name)
+        if hold not in HOLDS:
+            raise ValueError(f"step '{name}': hold '{hold}' is not one of {', '.join(HOLDS)}")
         self.plan = plan
         self.landing_tolerance = landing_tolerance
         self.landing_yaw_tolerance = landing_yaw_tolerance
@@ -133,10 +166,18 @@ class Step(RobotBehaviour):
         self.touchdown_gap = touchdown_gap
         self.load_share = load_share
         self.settle_s = settle_s
+        self.trajectory = walk if walk is not None else concatenate([p.trajectory for p in plan.phases], name)
+        self.starts_at = starts_at if walk is not None else 0.0
+        self.hold = hold
+        # where each phase starts on the step's own time line (s)
+        self._phase_at = np.concatenate([[0.0], np.cumsum([p.trajectory.duration for p in plan.phases])])
         self.landing: Foothold | None = None
         self.landing_error = (math.inf, math.inf)
         self.liftoff_residual = math.inf
         self.min_com_margin = math.inf
+        self.holding = False  # the safe hold is reached (hold_safely): both feet down, or held
+        self._phases: tuple[StepPhase, ...] = plan.phases  # followed; hold_safely's set-down after
+        self._setting_down = False
         self._robot: Any = None
         self._index = 0
         self._t0 = 0.0
@@ -150,11 +191,12 @@ class Step(RobotBehaviour):
     @property
     def phase(self) -> StepPhase:
         """The phase being followed."""
-        return self.plan.phases[min(self._index, len(self.plan.phases) - 1)]
+        return self._phases[min(self._index, len(self._phases) - 1)]
 
     def initialise(self) -> None:
         self._robot = self.robot
         self._balance = getattr(self._robot, "set_balance", None)
+        self._phases, self._setting_down, self.holding = self.plan.phases, False, False
         self._index, self._t0 = 0, self._robot.time
         self._ahead_t, self._ahead_i = np.zeros(0), 0
         self.landing, self.landing_error = None, (math.inf, math.inf)
@@ -171,6 +213,8 @@ class Step(RobotBehaviour):
         phase = self.phase
         t = robot.time - self._t0
         self._track(phase, t, robot.control_dt)
+        if self._setting_down:
+            return self._set_down(phase, t)
         if len(phase.support) == 1:
             self._watch_com(phase.support[0])
         if phase.name in ("touchdown", "shift_back"):
@@ -196,6 +240,99 @@ class Step(RobotBehaviour):
             return Status.SUCCESS
         self._t0, self._ahead_t, self._ahead_i = robot.time, np.zeros(0), 0
         return Status.RUNNING
+
+    # --- the guard's interface (behaviours.guard.GuardedMotion) ---------------------------------
+
+    @property
+    def support_required(self) -> bool:
+        """True while the plan has one foot on the floor: its sole must touch the floor over an
+        area (a stance foot rolled onto an edge counts as the CoM outside its support)."""
+        return len(self.phase.support) == 1
+
+    def planned_time(self, robot: Any) -> float:
+        """Where the step is along :attr:`trajectory` now (s): a phase's end while it settles."""
+        phase = min(self._index, len(self.plan.phases) - 1)
+        t = min(robot.time - self._t0, self.plan.phases[phase].trajectory.duration)
+        return self.starts_at + float(self._phase_at[phase]) + t
+
+    def com_limit(self, config: GuardConfig) -> float:
+        """The least CoM margin (m) over the foot contacts: the guard's ``min_com_margin``, or the
+        margin the plan keeps inside the stance sole if that is less (a narrow sole: the CoM over
+        its middle is less than ``min_com_margin`` from its edge)."""
+        return min(config.min_com_margin, self.plan.sole_margin)
+
+    def hold_safely(self, robot: Any, clear_ahead: bool = True) -> str:
+        """Put the robot on both feet, the way ``hold`` says; what it does, in words.
+
+        ``auto``: when the robot tips towards the swing foot (its capture point's error from the
+        plan points there) the plain hold, whose two-foot feed-forward sets a lifted foot down
+        where it is; else the step's own plan to both feet
+        (:mod:`executive.planning.stepping_hold`): back to where the foot lifted from or on to
+        its foothold, whichever is shorter on one foot (back when the path ahead is what tripped,
+        ``clear_ahead`` False); a weight shift undone, a weight shift back finished. ``freeze``:
+        the plain hold. ``plan``: the plan, as ``auto`` does when the robot does not tip towards
+        the swing foot. :attr:`holding` turns True once the robot holds.
+        """
+        index = min(self._index, len(self.plan.phases) - 1)
+        t = robot.time - self._t0
+        one_foot = len(self.plan.phases[index].support) == 1
+        if self.hold == "freeze" or (self.hold == "auto" and self._tips_towards_swing(robot, index, t)):
+            robot.hold()
+            self.holding = True
+            if not one_foot:
+                return "held on both feet where it stands"
+            if self.hold == "freeze":
+                return "held where it is"
+            return f"the {self.plan.swing} foot put down where it is (the robot tips towards it)"
+        if one_foot:
+            back_s, on_s = single_support_left(self.plan, index, t)
+            back = back_s <= on_s or not clear_ahead
+        else:  # both feet down: a weight shift undone, a weight shift back finished
+            back = index == 0
+        phases = back_to_both_feet(self.plan, index, t) if back else on_to_both_feet(self.plan, index, t)
+        if not phases:
+            robot.hold()
+            self.holding = True
+            return "held on both feet where it stands"
+        self._phases, self._setting_down = phases, True
+        self._index, self._t0, self._ahead_t, self._ahead_i = 0, robot.time, np.zeros(0), 0
+        self._track(phases[0], 0.0, robot.control_dt)  # this period's target already
+        where = "back down where it lifted from" if back else "down on its foothold"
+        if phases[0].name != "set_down":
+            return "the weight shifted back onto both feet" if back else "the weight shift back finished"
+        return f"the {self.plan.swing} foot set {where}, the weight shifted onto both feet"
+
+    def _tips_towards_swing(self, robot: Any, index: int, t: float) -> bool:
+        """Whether the measured capture point's error from the plan's lies within 60 degrees of
+        the direction from the stance foot to the swing foot (Pratt et al. 2006's capture point
+        ``c + c_dot / omega``, ``omega = sqrt(g / h)``)."""
+        world, data = robot.world, robot.data
+        model, base = world.model, world.ids.base_body
+        planned = _com_at(self.plan.phases[index], np.array([t]))[0]
+        floor = world.ids.floor_geom
+        height = planned[2] - (float(data.geom_xpos[floor][2]) if floor >= 0 else 0.0)
+        omega = math.sqrt(float(np.linalg.norm(model.opt.gravity)) / max(height, 1e-3))
+        mujoco.mj_subtreeVel(model, data)
+        error = data.subtree_com[base][:2] + data.subtree_linvel[base][:2] / omega - planned[:2]
+        feet = world.profile.feet
+        swing = data.xpos[model.body(feet[self.plan.swing].body).id][:2]
+        towards = swing - data.xpos[model.body(feet[self.plan.stance].body).id][:2]
+        size = float(np.linalg.norm(error)) * float(np.linalg.norm(towards))
+        return size > 0.0 and float(error @ towards) > _TOWARDS_SWING * size
+
+    def _set_down(self, phase: StepPhase, t: float) -> Status:
+        """Follow the set-down phases of :meth:`hold_safely`; :attr:`holding` once they have played."""
+        if t < phase.trajectory.duration:
+            self.feedback_message = f"{self.name} {phase.name}: {t:.2f}/{phase.trajectory.duration:.2f} s"
+            return Status.RUNNING
+        if self._index + 1 < len(self._phases):
+            self._index += 1
+            self._t0, self._ahead_t, self._ahead_i = self._robot.time, np.zeros(0), 0
+        else:
+            self.holding = True
+        return Status.RUNNING
+
+    # --- checks -------------------------------------------------------------------------------
 
     def _phase_check(self, name: str, last_chance: bool) -> str | None:
         """At a phase's end: "" when its check passes, None to wait longer, else why it fails."""

@@ -2,6 +2,8 @@
 
     python benchmarks/bench_executive.py [SCENARIO] [--repeat N] [--control-dt S] [--breakdown]
 
+(SCENARIO: a bundled name or a file; scenarios/fall_steps.yaml measures a guarded walk.)
+
 Runs the mission with the :class:`executive.runtime.mission.Executive` (truth = estimate, auto
 approval), with live risk guards on and off, ``N`` times each, interleaved. During each
 run the controls of every physics step are recorded, once per control period (thin
@@ -53,6 +55,7 @@ import executive.execution.simulated as execution
 import executive.monitoring.detectors as detectors
 import executive.monitoring.live_risk as live_risk
 from behaviours.move_hand import MoveHand
+from behaviours.step import Step
 from executive.runtime.mission import Executive, freeze_startup_heap
 
 STATE = mujoco.mjtState.mjSTATE_INTEGRATION
@@ -158,6 +161,7 @@ _PARTS: tuple[tuple[str, type, str], ...] = (
     ("  of which the closest-call clearance", detectors.FailureDetector, "_clearance"),
     ("servo ctrl of the period", execution.JointTargetController, "period"),
     ("motion behaviour (MoveHand.update)", MoveHand, "update"),
+    ("footstep behaviour (Step.update)", Step, "update"),
     ("guard: distance now + look-ahead", live_risk.LiveRiskMonitor, "clearance"),
     ("guard: CoM margin", live_risk.LiveRiskMonitor, "com_margin"),
 )
@@ -332,7 +336,7 @@ def breakdown(scenario: str, guard: bool, control_dt: float) -> None:
     raw_tick = r.exec_raw / n
     wall_tick = r.exec_wall / n
     tree_tick = r.tick_mean
-    in_tree = (MoveHand, live_risk.LiveRiskMonitor)
+    in_tree = (MoveHand, Step, live_risk.LiveRiskMonitor)
     inside_tree = sum(spent[label] for label, cls, _ in _PARTS if cls in in_tree)
     rows: list[tuple[str, float]] = [
         ("physics at the raw replay's speed", raw_tick),

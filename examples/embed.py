@@ -19,7 +19,6 @@ and longest ``tick()`` against the 10 ms period, and the periods the loop overra
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import sys
 import time
 
@@ -34,6 +33,7 @@ from executive import (
     load,
 )
 from executive.decision.audit import now_iso
+from executive.scenario import with_threshold
 
 PERIOD_S = 0.01  # the host's control period: 100 Hz
 
@@ -45,11 +45,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--deny", action="store_true", help="the approver refuses")
     args = parser.parse_args(argv)
 
-    scenario = load(args.scenario)
-    if args.threshold is not None:
-        scenario = dataclasses.replace(
-            scenario, risk=dataclasses.replace(scenario.risk, threshold=args.threshold)
-        )
+    scenario = with_threshold(load(args.scenario), args.threshold)  # checked as the file's value
 
     def approver(request: ApprovalRequest) -> ApprovalDecision:
         """The host's policy: approve the recommended alternative if its collision risk is small."""

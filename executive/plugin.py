@@ -6,8 +6,11 @@ A kind is a :class:`TaskKind` subclass with a ``name`` (its YAML key) and its
 values it offers on this robot in this :class:`World`, and lays one out as :class:`Step`
 values (hand targets from :class:`HandFrames`; :class:`PlanningError` when it cannot).
 Make it known with :func:`register` (or an entry point in ``executive.task_kinds``), and
-try it with :func:`plan_alternative`. docs/task_kinds.md has the details and a complete
-example, examples/plugin_kind/wave_kind.py::
+try it with :func:`plan_alternative`. Declare the block's keys once as :attr:`TaskKind.keys`, a
+:class:`Block` of :class:`Number`, :class:`Vector`, :class:`Text`, :class:`Choice` and
+:class:`Integer` declarations: read with them, and ``executive schema`` describes the block from
+them (:meth:`TaskKind.schema`). docs/task_kinds.md has the details and a complete example,
+examples/plugin_kind/wave_kind.py::
 
     from executive.plugin import Alternative, Task, TaskKind, register
 """
@@ -16,6 +19,7 @@ from __future__ import annotations
 
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.types import PlanningError
+from executive.schema.declarations import Block, Choice, Integer, Number, Text, Vector
 from executive.schema.readers import over_table
 from executive.schema.types import SceneConfig
 from executive.schema.yaml_nodes import Node
@@ -27,14 +31,20 @@ from executive.world.model import World
 
 __all__ = [
     "Alternative",
+    "Block",
+    "Choice",
     "CompositionConfig",
     "HandFrames",
+    "Integer",
     "Node",
+    "Number",
     "PlanningError",
     "SceneConfig",
     "Step",
     "Task",
     "TaskKind",
+    "Text",
+    "Vector",
     "Verdict",
     "World",
     "over_table",

@@ -1,4 +1,5 @@
-"""Shared fixtures: paths to test data and the shared G1 model, a clean py_trees blackboard."""
+"""Shared fixtures: paths to test data and the shared G1 model, a clean py_trees blackboard, and every
+scenario a test loads checked against the scenario schema."""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import os
 if not os.environ.get("MUJOCO_GL") and not os.environ.get("DISPLAY"):
     os.environ["MUJOCO_GL"] = "egl"
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -26,6 +28,17 @@ def _clear_blackboard() -> None:
 
     py_trees.blackboard.Blackboard.enable_activity_stream(maximum_size=100)
     py_trees.blackboard.Blackboard.clear()
+
+
+@pytest.fixture(autouse=True)
+def _loaded_scenarios_pass_the_schema(monkeypatch: pytest.MonkeyPatch) -> Iterator[None]:
+    """A scenario the loader accepts in any test also validates against the scenario schema
+    (``executive schema``; tests/schema_check.py): the schema never refuses what the executive reads."""
+    from schema_check import watch_loader  # tests/ is on sys.path (pytest's default prepend import mode)
+
+    refused = watch_loader(monkeypatch)
+    yield
+    assert not refused, "the loader accepted what the scenario schema refuses:\n" + "\n".join(refused)
 
 
 @pytest.fixture

@@ -31,6 +31,25 @@ def test_list_names_the_bundled_scenario_and_robots() -> None:
     assert "humanoid" in out.stdout and "unitree_g1" in out.stdout
 
 
+def test_version_is_the_packages_one_written_once(capsys: pytest.CaptureFixture[str]) -> None:
+    """``executive --version`` prints ``executive.__version__``, which pyproject.toml reads (its
+    version is dynamic), so the installed distribution's metadata says the same."""
+    import importlib.metadata
+    import tomllib
+
+    import executive
+    from executive.cli.main import main
+
+    with pytest.raises(SystemExit) as done:
+        main(["--version"])
+    assert done.value.code == 0
+    assert capsys.readouterr().out.strip() == f"executive {executive.__version__}"
+    project = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    assert "version" not in project["project"] and "version" in project["project"]["dynamic"]
+    assert project["tool"]["setuptools"]["dynamic"]["version"] == {"attr": "executive.__version__"}
+    assert importlib.metadata.version("risk-gated-executive") == executive.__version__
+
+
 def test_validate_bundled_from_another_directory(tmp_path: Path) -> None:
     out = run("validate", "book_transfer", cwd=tmp_path)
     assert out.returncode == 0, out.stderr

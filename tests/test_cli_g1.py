@@ -43,7 +43,9 @@ def test_validate_and_plan_list_every_alternative(g1_file: Path) -> None:
     assert "unitree_g1" in _ok(_cli("validate", str(g1_file)))
     doc = json.loads(_ok(_cli("plan", str(g1_file), "--json", "--rollouts", "0")))
     rows = {row["name"]: row for row in doc["tasks"][0]["alternatives"]}
-    assert set(rows) == {"left", "right", "left_to_right"}
+    assert set(rows) == {"left", "right", "left_to_right", "left_sidestep", "right_sidestep"}
+    for side in ("left", "right"):  # both arms reach: the side-steps are not planned
+        assert rows[f"{side}_sidestep"]["error"].startswith(f"not needed: '{side}'"), rows[f"{side}_sidestep"]
     for side in ("left", "right"):
         assert rows[side]["feasible"], rows[side]
         risk = rows[side]["risk"]

@@ -151,7 +151,7 @@ def test_optional_blocks_take_the_dataclass_defaults() -> None:
     assert s.risk == RiskConfig()
     assert s.trials == TrialsConfig()
     assert s.scene.obstacles == ()
-    assert s.mission[0].alternatives == ("left", "right", "left_to_right")
+    assert s.mission[0].alternatives == ("left", "right", "left_to_right", "left_sidestep", "right_sidestep")
 
 
 def test_partial_risk_blocks_keep_the_other_defaults() -> None:

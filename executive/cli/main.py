@@ -20,7 +20,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 from numpy.typing import NDArray
 
+from executive import __version__
 from executive.cli import replay as replay_command
+from executive.cli import schema as schema_command
 from executive.cli import tree as tree_command
 from executive.cli.output_paths import check_file, check_folder
 from executive.cli.signals import interrupted_text, interrupts_held, stop_reason, stop_signals_as_interrupt
@@ -50,6 +52,14 @@ def _load(name: str) -> Scenario:
     from executive.scenario import load
 
     return load(name)
+
+
+def _load_gated(args: argparse.Namespace) -> Scenario:
+    """The scenario of ``run`` and ``plan`` with their ``--rollouts`` and ``--threshold`` applied."""
+    from executive.decision.physics_check import with_rollouts
+    from executive.scenario import with_threshold
+
+    return with_threshold(with_rollouts(_load(args.scenario), args.rollouts), args.threshold)
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
@@ -122,10 +132,8 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from executive.decision.physics_check import with_rollouts
-
     _check_run_paths(args)
-    scenario = with_rollouts(_load(args.scenario), args.rollouts)
+    scenario = _load_gated(args)
     if args.alternative is None:
         return _run_mission(scenario, args)
     return _run_one(scenario, args)
@@ -272,12 +280,12 @@ def _run_one(scenario: Scenario, args: argparse.Namespace) -> int:
 
 def _cmd_plan(args: argparse.Namespace) -> int:
     from executive.decision.assessment import assess_task
-    from executive.decision.physics_check import PhysicsCheck, with_rollouts
+    from executive.decision.physics_check import PhysicsCheck
     from executive.report.plots import risk_json, risk_table
 
     if args.plot:
         check_folder(args.plot, "--plot")
-    scenario = with_rollouts(_load(args.scenario), args.rollouts)
+    scenario = _load_gated(args)
     world = build(scenario)
     tasks = []
     physics = PhysicsCheck(scenario.risk.rollouts.jobs)
@@ -308,14 +316,14 @@ def _stance_after(
     alternatives: list[AlternativeRisk],
     q_start: FloatArray | None,
 ) -> FloatArray | None:
-    """After a task that walks (its kind ``moves_base``), the start of the next: where the chosen
-    walk ends, the estimate's base put there; else ``q_start`` as it was."""
+    """After a task that walks (its kind ``moves_base``, or its chosen alternative walks), the start
+    of the next: where the chosen plan ends, the estimate's base put there; else ``q_start``."""
     from executive.report.plots import chosen_index
     from executive.tasks.registry import get as task_kind
 
     chosen = chosen_index(alternatives, scenario.risk.ordering)
     plan = alternatives[chosen].plan if chosen is not None else None
-    if not task_kind(task.kind).moves_base or plan is None:
+    if plan is None or not (task_kind(task.kind).moves_base or any(plan.walks.values())):
         return q_start
     end = plan.ordered_trajectories()[-1].qpos[-1].copy()
     world.data.qpos[world.base_qpos] = end[world.base_qpos]
@@ -465,6 +473,10 @@ _ROLLOUTS_HELP = (
     "physics rollouts per alternative on truths sampled from the uncertainty (overrides the "
     "scenario's risk.rollouts.count; 0: off, the dry runs still run)"
 )
+_THRESHOLD_HELP = (
+    "override risk.threshold: above it the lowest-risk alternative needs approval (>= 0 and below "
+    "the largest value risk.ordering can take, so the gate can never be switched off)"
+)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -472,6 +484,7 @@ def _parser() -> argparse.ArgumentParser:
         prog="executive",
         description="Risk-gated behaviour-tree executive for humanoid robots.",
     )
+    parser.add_argument("--version", action="version", version=f"%(prog)s {__version__}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_inspection(sub)
     _add_run(sub)
@@ -480,8 +493,9 @@ def _parser() -> argparse.ArgumentParser:
     tree_command.add_parser(sub, _SCENARIO_HELP)
     replay_command.add_parser(sub, _PIXELS, _PORT)
     _add_console(sub)
+    schema_command.add_parser(sub)
     for name, command in sub.choices.items():
-        if name != "list":  # every command that loads a scenario
+        if name not in ("list", "schema"):  # every command that loads a scenario
             command.add_argument(
                 "--allow-module",
                 action="append",
@@ -513,6 +527,7 @@ def _add_inspection(sub: argparse._SubParsersAction[argparse.ArgumentParser]) ->
     p.add_argument("--json", action="store_true", help="print the table as JSON for machines")
     p.add_argument("--plot", metavar="DIR", help="write CoM/support-polygon and distance plots to DIR")
     p.add_argument("--rollouts", type=_ROLLOUTS, metavar="N", help=_ROLLOUTS_HELP)
+    p.add_argument("--threshold", type=float, metavar="X", help=_THRESHOLD_HELP)
     p.set_defaults(func=_cmd_plan)
 
 
@@ -524,6 +539,7 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
     )
     p.add_argument("scenario", help=_SCENARIO_HELP)
     p.add_argument("--rollouts", type=_ROLLOUTS, metavar="N", help=_ROLLOUTS_HELP)
+    p.add_argument("--threshold", type=float, metavar="X", help=_THRESHOLD_HELP)
     p.add_argument(
         "--alternative",
         help="execute this alternative of task 0 only (left, right, left_to_right, ...): "
@@ -600,7 +616,10 @@ def _add_fidelity(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--out", metavar="DIR", help="suite folder (default runs/<timestamp>-<scenario>-fidelity)")
     p.add_argument("--seed", type=_SEED, default=None, help="seed of the variants (default: trials.seed)")
     p.add_argument(
-        "--rollouts", type=_ROLLOUTS, default=0, help="risk.rollouts.count of every variant (0: off)"
+        "--rollouts",
+        type=_ROLLOUTS,
+        default=0,
+        help="risk.rollouts.count of every variant (default 0: off, whatever the scenario says)",
     )
     p.add_argument("--resume", action="store_true", help="complete the suite in --out DIR")
     p.set_defaults(func=_cmd_fidelity)

@@ -54,7 +54,7 @@ from executive.risk.press import press_forces
 from executive.risk.push import assess_placement, plan_forces
 from executive.risk.report import RiskReport
 from executive.schema.failure_modes import mode_names
-from executive.tasks.base import Task
+from executive.tasks.base import Alternative, Task
 from executive.tasks.registry import get as task_kind
 from executive.tasks.steps import plan_alternative
 from executive.world.model import World
@@ -295,27 +295,51 @@ def assess_task(
     collision_model: CollisionModel | None = None,
     q_start: np.ndarray | None = None,
 ) -> list[AlternativeRisk]:
-    """Plan and assess every alternative of ``task`` on the estimate ``world``."""
+    """Plan and assess every alternative of ``task`` on the estimate ``world``, in the task's order.
+
+    An alternative that stands in for another (the kind's ``instead_of``) is planned after the
+    rest, and only when the one it stands in for, asked for too, could not be planned.
+    """
     planner = planner or Planner(world)
     model = collision_model or CollisionModel(
         world, world.scenario.risk, uncertainty=world.scenario.uncertainty
     )
-    out = []
-    for alternative in task_kind(task.kind).alternatives(task, world):
+    kind = task_kind(task.kind)
+    alternatives = kind.alternatives(task, world)
+    asked = {a.name for a in alternatives}
+    later = [a for a in alternatives if kind.instead_of.get(a.name) in asked]
+    rows: dict[str, AlternativeRisk] = {}
+    for alternative in [a for a in alternatives if a not in later] + later:
         name = alternative.name
-        if alternative.unsupported:
-            out.append(AlternativeRisk(name, False, None, None, alternative.unsupported))
+        stands_in = kind.instead_of.get(name, "")
+        if alternative in later and rows[stands_in].feasible and not alternative.unsupported:
+            reason = f"not needed: '{stands_in}' can be planned from where the robot stands"
+            rows[name] = AlternativeRisk(name, False, None, None, reason)
             continue
-        t0 = time.perf_counter()
-        try:
-            plan = plan_alternative(planner, world, task, name, q_start)
-        except PlanningError as exc:
-            out.append(AlternativeRisk(name, False, None, None, str(exc), time.perf_counter() - t0))
-            continue
-        t1 = time.perf_counter()
-        risk = assess_plan(world, plan, model)
-        out.append(AlternativeRisk(name, True, risk, plan, "", t1 - t0, time.perf_counter() - t1))
-    return out
+        rows[name] = _assess_alternative(world, task, alternative, planner, model, q_start)
+    return [rows[a.name] for a in alternatives]
+
+
+def _assess_alternative(
+    world: World,
+    task: Task,
+    alternative: Alternative,
+    planner: Planner,
+    model: CollisionModel,
+    q_start: np.ndarray | None,
+) -> AlternativeRisk:
+    """Plan and assess one alternative (a row with the reason when it cannot be planned)."""
+    name = alternative.name
+    if alternative.unsupported:
+        return AlternativeRisk(name, False, None, None, alternative.unsupported)
+    t0 = time.perf_counter()
+    try:
+        plan = plan_alternative(planner, world, task, name, q_start)
+    except PlanningError as exc:
+        return AlternativeRisk(name, False, None, None, str(exc), time.perf_counter() - t0)
+    t1 = time.perf_counter()
+    risk = assess_plan(world, plan, model)
+    return AlternativeRisk(name, True, risk, plan, "", t1 - t0, time.perf_counter() - t1)
 
 
 register_model("collision", _collision_model)

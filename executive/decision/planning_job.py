@@ -285,6 +285,7 @@ class Planning:
         plan = feasible[0].plan
         step_of = {id(traj.qpos): name for name, traj in plan.trajectories.items()}
         out = []
+        seen: set[tuple[str, str | None, frozenset[tuple[str, str]]]] = set()
         for node in task_kind(task.kind).subtree(plan, guard=True).iterate():
             if not isinstance(node, RiskGuard):
                 continue
@@ -294,7 +295,9 @@ class Planning:
             if step is None:  # a motion not among the plan's trajectories: its guard computes its own
                 continue
             for carried, allow, dist, names in monitor.memo(qpos):
-                out.append(PreparedKnots(step, carried, allow, dist, names))
+                if (step, carried, allow) not in seen:  # a walk's footsteps share its knots
+                    seen.add((step, carried, allow))
+                    out.append(PreparedKnots(step, carried, allow, dist, names))
         return tuple(out)
 
     def close(self) -> None:

@@ -128,6 +128,7 @@ class RiskSelector(py_trees.composites.Composite):
         )
         self._by_name: dict[str, py_trees.behaviour.Behaviour] = {}
         self._last_look: float | None = None  # robot time of the last observation
+        self._walked = False  # an alternative that walks has run: the base is measured again
         self.bb = self.attach_blackboard_client(name=name, namespace=NAMESPACE)
         self.bb.register_key("robot", access=py_trees.common.Access.READ)
         self.bb.register_key("holding", access=py_trees.common.Access.WRITE)
@@ -244,7 +245,7 @@ class RiskSelector(py_trees.composites.Composite):
         The robot's grasp record (``holding``) loses a hand whose touch no longer holds its object.
         """
         robot = self.bb.robot
-        follow = self.kind.moves_base  # after (part of) a walk the base is measured again
+        follow = self.kind.moves_base or self._walked  # after (part of) a walk: the base measured again
         fields = refresh(self.estimate, robot, dict(self.bb.holding), reason, follow_base=follow)
         self.bb.holding = dict(fields["holding"])
         self._last_look = robot.time
@@ -372,6 +373,7 @@ class RiskSelector(py_trees.composites.Composite):
         value = alt.risk.value(self.ordering)
         self._gate.check(name, value)  # the risk gate's invariant: raises ExecutiveError
         self.chosen, self.chosen_risk = name, risk_row(alt, self.ordering)
+        self._walked = self._walked or bool(alt.plan is not None and any(alt.plan.walks.values()))
         self.current_child = self._by_name[name]
         self.tried.append(name)
         self.log.record(

@@ -9,7 +9,11 @@ Two quantities, each against a limit of ``risk.guard`` (:class:`GuardConfig`):
   into the path trips the guard before the hand gets there.
 * **CoM margin**: the signed distance of the measured centre of mass inside the
   support polygon of the feet's *current contacts* (Long et al. 2018, eq. 3-4; the
-  same polygon geometry as the fall model, :mod:`executive.world.polygon`).
+  same polygon geometry as the fall model, :mod:`executive.world.polygon`): both feet, or
+  the stance sole alone while the other foot swings. The limit is the motion's
+  (``com_limit``: ``min_com_margin``, or less for a step on a narrow sole); a step also
+  counts contacts that span no polygon (a foot rolled onto an edge) as the CoM outside
+  (:func:`edge_margin`).
 
 The allowances are the planner's and the risk model's (a hand may touch the object
 it grasps; a carried object its support while lifted or placed), so a planned
@@ -39,6 +43,7 @@ __all__ = [
     "GuardVerdict",
     "LiveRiskMonitor",
     "contact_support_margin",
+    "edge_margin",
     "foot_contact_rows",
     "interior_margin",
     "obstacle_guard_limits",
@@ -170,6 +175,25 @@ def contact_support_margin(
         return None
 
 
+def edge_margin(points: FloatArray, x: FloatArray) -> float:
+    """Signed margin of ``x`` over contact ``points`` (P, 2) that span no polygon: fewer than three,
+    or all in a line (a foot rolled onto an edge). Such a support has no inside: minus the
+    distance from ``x`` to the segment the points cover (their hull); -inf without a point.
+    """
+    if not len(points):
+        return -math.inf
+    start = points[0]
+    far = points[int(np.argmax(((points - start) ** 2).sum(axis=1)))]
+    line = far - start
+    length2 = float(line @ line)
+    if length2 == 0.0:
+        return -float(np.hypot(*(x - start)))
+    along = (points - start) @ line / length2  # the segment: the points' extremes along the line
+    lo, hi = float(along.min()), float(along.max())
+    u = min(max(float((x - start) @ line) / length2, lo), hi)
+    return -float(np.hypot(*(x - start - u * line)))
+
+
 class GuardVerdict(NamedTuple):
     """What one live check found. ``ok`` False names the limit crossed in ``reason``.
 
@@ -185,6 +209,7 @@ class GuardVerdict(NamedTuple):
     robot_body: str
     env_body: str
     com_margin: float | None  # m, None when not measured; a certified lower bound when it clears the limit
+    crossed: str = ""  # the limit crossed: "clearance" or "com_margin" ("" when ok)
 
     def as_dict(self) -> dict[str, object]:
         return {
@@ -195,6 +220,7 @@ class GuardVerdict(NamedTuple):
             "robot_body": self.robot_body,
             "env_body": self.env_body,
             "com_margin": self.com_margin,
+            "crossed": self.crossed,
         }
 
 
@@ -473,10 +499,15 @@ class LiveRiskMonitor:
                     out = (float(track.dist[k]), float(times[k]), *track.names[k])
         return out
 
-    def com_margin(self, world: World, data: mujoco.MjData, at_least: float | None = None) -> float | None:
+    def com_margin(
+        self, world: World, data: mujoco.MjData, at_least: float | None = None, *, on_edge: bool = False
+    ) -> float | None:
         """Margin of the measured CoM in the polygon of the current foot contacts (None: no support).
 
         ``data`` must hold a stepped (or ``mj_forward``-ed) state: contacts and ``subtree_com``.
+
+        ``on_edge``: contacts that span no polygon (fewer than three, or in a line: a foot rolled
+        onto an edge, or none) give :func:`edge_margin` (at most 0) instead of None.
 
         ``at_least``: the margin may be a certified lower bound, if that bound is at least this.
         The margin of a point in a convex hull moves by at most the point's move plus the
@@ -490,7 +521,9 @@ class LiveRiskMonitor:
             feet = frozenset(g for geoms in world.ids.foot_geoms.values() for g in geoms)
             cached = self._feet[id(world)] = (world, feet)
         if at_least is None:
-            return contact_support_margin(world, data, cached[1])
+            rows = foot_contact_rows(world, data, cached[1])
+            margin = contact_support_margin(world, data, rows=rows)
+            return self._edge(world, data, rows) if margin is None and on_edge else margin
         contact = data.contact
         pairs = contact.geom.tobytes() if data.ncon else b""
         cx, cy, _ = data.subtree_com[world.ids.base_body].tolist()
@@ -510,7 +543,14 @@ class LiveRiskMonitor:
         if margin is not None:
             take = np.array(rows, dtype=np.intp)  # fancy indexing takes an array faster than a list
             self._support[id(world)] = (world, pairs, take, contact.pos[take, :2], (cx, cy), margin)
+        elif on_edge:
+            return self._edge(world, data, rows)
         return margin
+
+    @staticmethod
+    def _edge(world: World, data: mujoco.MjData, rows: list[int]) -> float:
+        """:func:`edge_margin` of the CoM over the foot contacts ``rows``."""
+        return edge_margin(data.contact.pos[rows, :2], data.subtree_com[world.ids.base_body][:2])
 
     def check(
         self,
@@ -522,9 +562,15 @@ class LiveRiskMonitor:
         carried: str | None,
         allow: frozenset[tuple[str, str]],
         com_margin: float | None,
+        com_limit: float | None = None,
     ) -> GuardVerdict:
-        """Both checks against the limits; the first limit crossed is the reason."""
+        """Both checks against the limits; the first limit crossed is the reason.
+
+        ``com_limit``: the least CoM margin (m; None: ``min_com_margin``), the motion's
+        (``GuardedMotion.com_limit``).
+        """
         cfg = self.config
+        least = cfg.min_com_margin if com_limit is None else com_limit
         d, at, robot_body, env_body = self.clearance(
             measured_qpos,
             trajectory_qpos,
@@ -534,23 +580,33 @@ class LiveRiskMonitor:
             allow=allow,
             at_least=cfg.min_distance,
         )
-        reason = ""
+        reason, crossed = "", ""
         shift = self._shift_by_name.get(env_body, 0.0)
         if d < cfg.min_distance:
             when = "now" if at <= t else f"in {at - t:.2f} s"
             own = ", its own from its clearance" if shift else ""
-            reason = (
-                f"guard: {robot_body} would come within {(d - shift) * 1000:.1f} mm of {env_body} {when} "
-                f"(limit {(cfg.min_distance - shift) * 1000:.0f} mm{own})"
+            reason, crossed = (
+                (
+                    f"guard: {robot_body} would come within {(d - shift) * 1000:.1f} mm of {env_body} {when} "
+                    f"(limit {(cfg.min_distance - shift) * 1000:.0f} mm{own})"
+                ),
+                "clearance",
             )
+        elif com_margin is not None and com_margin < least:
+            reason, crossed = _com_reason(com_margin, least), "com_margin"
         if shift:
             d -= shift  # the verdict gives the pair's own distance
-        elif com_margin is not None and com_margin < cfg.min_com_margin:
-            reason = (
-                f"guard: centre of mass {com_margin * 1000:.1f} mm inside the support polygon "
-                f"(limit {cfg.min_com_margin * 1000:.0f} mm)"
-            )
-        return GuardVerdict(not reason, reason, d, at, robot_body, env_body, com_margin)
+        return GuardVerdict(not reason, reason, d, at, robot_body, env_body, com_margin, crossed)
+
+
+def _com_reason(margin: float, limit: float) -> str:
+    """Why a CoM margin below its limit trips the guard, in words."""
+    bound = f"(limit {limit * 1000:.0f} mm)"
+    if margin == -math.inf:
+        return f"guard: no foot touches the floor {bound}"
+    if margin < 0.0:
+        return f"guard: centre of mass {-margin * 1000:.1f} mm outside the foot contacts' support {bound}"
+    return f"guard: centre of mass {margin * 1000:.1f} mm inside the support polygon {bound}"
 
 
 def obstacle_guard_limits(world: World, config: GuardConfig) -> dict[int, float]:

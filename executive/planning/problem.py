@@ -241,7 +241,7 @@ class PlanningProblem:
             foot.set_target_from_configuration(conf)
         polygon = SupportPolygon.from_feet(model, conf.data, self.foot_geoms)
         self.com.set_target(np.array([*polygon.centre, 0.0]))
-        attach, relative = self._attachment(conf.data, carried)
+        attach, relative = self.attachment(conf.data, carried)
         collisions, required = self.collisions.limit(carried, allow_contact, attach)
         # Keep a small extra margin in the QP so that interpolated knots stay inside the checked one.
         margin = self.config.support_margin + 0.002
@@ -279,7 +279,7 @@ class PlanningProblem:
         self.posture.set_cost(posture_cost)
         return tasks, posture_cost, idle_dofs
 
-    def _attachment(
+    def attachment(
         self, data: mujoco.MjData, carried: tuple[str, str] | None
     ) -> tuple[dict[int, int], Relative | None]:
         """A carried object's geom -> its hand's body, and its pose relative to the hand site now."""

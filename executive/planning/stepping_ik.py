@@ -26,7 +26,7 @@ from executive.planning.stepping_ankles import AnkleReserveLimit, reserve_limit,
 from executive.planning.stepping_geometry import yaw_quat
 from executive.planning.stepping_knees import KneeBendLimit, find_knees
 from executive.planning.stepping_types import StepConfig
-from executive.planning.types import PlanningError
+from executive.planning.types import PlanningError, attach_object
 from executive.world.model import is_descendant
 
 __all__ = ["PhaseGoal", "StepIK", "StepPlanningError"]
@@ -88,9 +88,14 @@ class StepIK:
     """
 
     def __init__(
-        self, problem: PlanningProblem, configuration: mink.Configuration, config: StepConfig
+        self,
+        problem: PlanningProblem,
+        configuration: mink.Configuration,
+        config: StepConfig,
+        carried: tuple[str, str] | None = None,
     ) -> None:
         self.problem = problem
+        self.carried = carried
         self.configuration = configuration
         self.config = config
         self.planner_config = problem.config
@@ -118,6 +123,7 @@ class StepIK:
             else None
         )
         self._collision_limits: dict[str, tuple[GeomPairCollisionLimit, FloatArray]] = {}
+        self._attach, _ = problem.attachment(configuration.data, carried)
         self._active = self.collisions(next(iter(self.feet)))[0]  # the limit of the phase running
 
     def _posture(self, legs: dict[str, tuple[str, ...]], waist: Sequence[str]) -> None:
@@ -150,15 +156,17 @@ class StepIK:
 
     def collisions(self, swing: str) -> tuple[GeomPairCollisionLimit, FloatArray]:
         """The collision limit of a step of ``swing`` and its pairs' required clearance (m): the
-        whole-body planner's pairs (the arms against the scene and the body) and the swing leg
-        against the other leg, and both legs against the table, obstacles and objects."""
+        whole-body planner's pairs (the arms, and a carried object, against the scene and the body)
+        and the swing leg against the other leg, and both legs against the table, obstacles and
+        the objects not carried."""
         if swing in self._collision_limits:
             return self._collision_limits[swing]
         problem, model, ids = self.problem, self.model, self.problem.world.ids
-        pairs = problem.collisions.pairs()
+        pairs = problem.collisions.pairs(self.carried)
         required = list(problem.collisions.required_clearance(pairs))
         legs = {side: self._leg_geoms(side) for side in self.feet}
-        env = list(ids.table_geoms) + list(ids.obstacle_geoms.values()) + list(ids.object_geoms.values())
+        objects = [g for g in ids.object_geoms.values() if g not in self._attach]
+        env = list(ids.table_geoms) + list(ids.obstacle_geoms.values()) + objects
         groups: list[tuple[Sequence[int], Sequence[int]]] = [
             (legs[swing], legs[s]) for s in legs if s != swing
         ]
@@ -174,7 +182,7 @@ class StepIK:
             need + cfg.clearance_tolerance,
             max(cfg.detection_distance, float(np.max(need, initial=0.0)) + 0.05),
             cfg.collision_gain,
-            None,
+            self._attach or None,
             cfg.collision_recovery,
         )
         self._collision_limits[swing] = (limit, need)
@@ -215,6 +223,7 @@ class StepIK:
         self.posture.set_cost(cost)
         tasks, limits, constraints = self._set_tasks(goal, collisions)
         self._active = collisions
+        _, relative = self.problem.attachment(conf.data, self.carried)  # moves with its hand
         path = [conf.q]
         history = [self._error(goal)]
         iterations = 0
@@ -233,6 +242,9 @@ class StepIK:
             conf.integrate_inplace(velocity, cfg.ik_dt)
             conf.update()
             self._project(constraints)
+            if relative is not None:
+                attach_object(conf.data, relative)
+                conf.update()
             iterations += 1
             path.append(conf.q)
             history.append(self._error(goal))

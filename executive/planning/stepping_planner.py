@@ -46,6 +46,8 @@ class StepPlanner:
         planner_config: the whole-body planner's tuning (its IK step, timing and clearances);
             ignored when ``problem`` is given.
         problem: the whole-body planner's IK problem on ``world`` to share (built when None).
+        carried: (hand side, object) held through the steps: the object moves with its hand and
+            keeps its clearance from the scene and the body, as in a carry.
 
     Raises:
         PlanningInputError: when the robot does not have exactly two feet, or its base is not
@@ -58,6 +60,7 @@ class StepPlanner:
         config: StepConfig | None = None,
         planner_config: PlannerConfig | None = None,
         problem: PlanningProblem | None = None,
+        carried: tuple[str, str] | None = None,
     ) -> None:
         if len(world.profile.feet) != 2:
             raise PlanningInputError(
@@ -68,7 +71,7 @@ class StepPlanner:
         self.config = config or StepConfig()
         self.problem = problem or PlanningProblem(world, planner_config or PlannerConfig())
         self.configuration = mink.Configuration(self.model)
-        self.ik = StepIK(self.problem, self.configuration, self.config)
+        self.ik = StepIK(self.problem, self.configuration, self.config, carried)
         self.sides: tuple[str, ...] = tuple(world.profile.feet)
 
     # --- geometry of a configuration ---------------------------------------------------------
@@ -174,7 +177,7 @@ class StepPlanner:
                 exc.name, f"{swing} foot step to {target.describe()}: {exc}", exc.binds, exc.iterations
             ) from exc
         footholds = dict(start) | {swing: target}
-        return StepPlan(swing, stance, tuple(phases), start, footholds, time.perf_counter() - started)
+        return StepPlan(swing, stance, tuple(phases), start, footholds, margin, time.perf_counter() - started)
 
     def _check(self, q_start: FloatArray, swing: str, target: Foothold) -> str:
         """Raise PlanningInputError on a bad request; return the stance foot's side."""

@@ -143,6 +143,9 @@ class StepPlan:
         start: every foot's foothold before the step, by side.
         footholds: every foot's planned foothold after the step, by side (the swing foot's is
             the target).
+        sole_margin: the least margin (m) the plan keeps the CoM inside the stance sole while the
+            swing foot is off the floor
+            (:meth:`~executive.planning.stepping_planner.StepPlanner.sole_margin`).
         planning_s: wall time the plan took (s).
     """
 
@@ -151,6 +154,7 @@ class StepPlan:
     phases: tuple[StepPhase, ...]
     start: dict[str, Foothold]
     footholds: dict[str, Foothold]
+    sole_margin: float
     planning_s: float = 0.0
 
     @property

@@ -1,11 +1,10 @@
 """The physically meaningful range of every number a scenario holds.
 
-The scenario readers (:mod:`executive.scenario`, :mod:`executive.schema.readers`) reject a
-value outside its range with a message naming the key path, the value and the range; the
-dataclass fields in :mod:`executive.schema.types` and the bundled
-``scenarios/book_transfer.yaml`` document the same ranges beside each key. Units: metres,
-kilograms, seconds, degrees (as written in the file). Lower bounds that are exclusive
-(``> 0``) are stated where the readers use them.
+The keys' declarations (:mod:`executive.schema.scene_keys`, :mod:`executive.scenario.keys`,
+each task kind's ``keys``) use these: the readers reject a value outside its range with a message
+naming the key path, the value and the range, and ``executive schema`` (docs/scenarios.md) states
+the same ranges, from the same declarations. Units: metres, kilograms, seconds, degrees (as
+written in the file). Lower bounds that are exclusive (``> 0``) are stated in the declarations.
 """
 
 from __future__ import annotations

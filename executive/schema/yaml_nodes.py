@@ -17,9 +17,9 @@ from __future__ import annotations
 import difflib
 import math
 import re
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import NoReturn, TypeVar
+from typing import NoReturn
 
 import yaml
 
@@ -33,7 +33,6 @@ __all__ = [
     "describe",
     "load_yaml_file",
     "load_yaml_text",
-    "read_fields",
     "suggest",
     "unknown_name",
 ]
@@ -45,7 +44,6 @@ MAX_DOCUMENT_BYTES = 1 << 20
 #: Largest document accepted, counting every alias as a full copy of what it names.
 MAX_EXPANDED_NODES = 100_000
 
-T = TypeVar("T")
 ErrorType = type[ScenarioError]
 
 
@@ -443,19 +441,3 @@ def check_model_file(node: Node, path: Path) -> None:
             f"{str(path)!r} is not an MJCF model file (XML with a <mujoco> root element); "
             f"it is {kind} beginning {first!r}"
         )
-
-
-def read_fields(
-    node: Node, factory: Callable[..., T], readers: dict[str, tuple[str, Callable[[Node], object]]]
-) -> T:
-    """Build a dataclass from an optional-keys mapping: absent keys keep the dataclass default.
-
-    ``readers`` maps a YAML key to (field name, reader of the child node).
-    """
-    node.check_keys(optional=list(readers))
-    kwargs: dict[str, object] = {}
-    for key, (field_name, reader) in readers.items():
-        child = node.opt(key)
-        if child is not None:
-            kwargs[field_name] = reader(child)
-    return factory(**kwargs)

@@ -5,7 +5,9 @@ A mission is a sequence of :class:`Task` values, each read from its YAML block b
 third party's). The kind says which alternatives exist for the robot and world at
 hand (:meth:`TaskKind.alternatives`), turns one into planner steps
 (:meth:`TaskKind.steps`) and a behaviour subtree (:meth:`TaskKind.subtree`), and
-checks afterwards that the task did what it asked (:meth:`TaskKind.verify`).
+checks afterwards that the task did what it asked (:meth:`TaskKind.verify`). Its block's keys
+are declared once (:attr:`TaskKind.keys`, :mod:`executive.schema.declarations`): the kind reads
+with them and :meth:`TaskKind.schema` gives ``executive schema`` their JSON Schema.
 
 Register a kind with :func:`executive.tasks.registry.register`, an entry point in
 the group ``executive.task_kinds``, or ``kind: package.module:Class`` in the YAML.
@@ -14,9 +16,12 @@ the group ``executive.task_kinds``, or ``kind: package.module:Class`` in the YAM
 from __future__ import annotations
 
 import abc
+from collections.abc import Mapping
 from dataclasses import dataclass
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, ClassVar
 
+from executive.schema.declarations import Alternatives, Block, nullable
 from executive.schema.types import Task
 from executive.tasks.subtree import build_subtree
 
@@ -29,7 +34,12 @@ if TYPE_CHECKING:
     from executive.schema.yaml_nodes import Node
     from executive.world.model import World
 
-__all__ = ["Alternative", "Task", "TaskKind", "Verdict"]
+__all__ = ["Alternative", "Task", "TaskKind", "Verdict", "alternatives_key"]
+
+
+def alternatives_key(names: tuple[str, ...]) -> Alternatives:
+    """The declaration of a task block's ``alternatives``: distinct names of ``names``, at least one."""
+    return Alternatives("the alternatives the selector may choose from, in the order they are tried", names)
 
 
 @dataclass(frozen=True)
@@ -67,7 +77,16 @@ class TaskKind(abc.ABC):
       in (a ``place``).
 
     ``moves_base``: the task ends with the robot standing elsewhere (a ``step``); later tasks
-    plan from the stance it ends in.
+    plan from the stance it ends in. An alternative of another kind may walk too (its plan's
+    ``walks``): the same holds after it.
+
+    ``instead_of``: alternative -> the alternative it stands in for. It is planned only when that
+    one, asked for in the same planning round, cannot be planned (a transfer's side-step, where the
+    arm alone falls short); otherwise its row says it is not needed.
+
+    ``keys``: the block's keys (a :class:`~executive.schema.declarations.Block`), declared once for
+    :meth:`read` and :meth:`schema`; None (the default) leaves the block undescribed but for its
+    ``alternatives``.
     """
 
     name: ClassVar[str] = ""
@@ -75,6 +94,8 @@ class TaskKind(abc.ABC):
     leaves_held: ClassVar[bool] = False
     needs_held: ClassVar[bool] = False
     moves_base: ClassVar[bool] = False
+    instead_of: ClassVar[Mapping[str, str]] = MappingProxyType({})
+    keys: ClassVar[Block | None] = None
 
     @abc.abstractmethod
     def read(self, node: Node, scene: SceneConfig) -> Task:
@@ -98,10 +119,24 @@ class TaskKind(abc.ABC):
 
     def read_alternatives(self, node: Node, default: tuple[str, ...] = ()) -> tuple[str, ...]:
         """The block's optional ``alternatives`` (of :attr:`alternative_names`), else ``default``."""
-        from executive.schema.readers import read_alternatives
-
         found = node.opt("alternatives")
-        return read_alternatives(found, self.alternative_names) if found is not None else default
+        return alternatives_key(self.alternative_names).read(found) if found is not None else default
+
+    def schema(self) -> dict[str, Any]:
+        """The JSON Schema (draft 2020-12) of the kind's block, the mapping under its key.
+
+        ``executive schema`` and ``docs/scenarios.md`` show it. Default: the schema of :attr:`keys`;
+        without them, a mapping whose ``alternatives`` are checked and whose other keys are the
+        kind's own (described by the class's docstring).
+        """
+        if self.keys is not None:
+            return self.keys.json_schema()
+        words = (type(self).__doc__ or f"The {self.name} task kind.").strip().split("\n\n")[0]
+        return {
+            "description": " ".join(words.split()),
+            "type": "object",
+            "properties": {"alternatives": nullable(alternatives_key(self.alternative_names).json_schema())},
+        }
 
     def alternatives(self, task: Task, world: World) -> list[Alternative]:
         """The alternatives to assess: those offered that the task allows, in the task's order.

@@ -49,22 +49,36 @@ class HandFrames:
 
     Args:
         world: the estimate world (its home keyframe gives the home hand poses and the base).
+        stance: where the base stands instead (pelvis x, y on the floor, heading rad): the frames
+            of a robot that will have walked there (a side-step inside a composition).
     """
 
-    def __init__(self, world: World) -> None:
+    def __init__(self, world: World, stance: tuple[float, float, float] | None = None) -> None:
         self.world = world
         data = mujoco.MjData(world.model)
         mujoco.mj_resetDataKeyframe(world.model, data, world.ids.keyframe)
         mujoco.mj_kinematics(world.model, data)
         mat = data.xmat[world.ids.base_body]
         start, start_heading = data.xpos[world.ids.base_body].copy(), float(np.arctan2(mat[3], mat[0]))
-        self._moved = _walked(world, start, start_heading)
+        if stance is None:
+            self._moved = _walked(world, start, start_heading)
+        else:
+            shift = np.array(stance[:2], dtype=float) - start[:2]
+            self._moved = _Walked(start, stance[2] - start_heading, shift)
         self.home = {
             side: self._moved.target(HandTarget(side, data.site_xpos[site].copy(), site_quat(data, site)))
             for side, site in world.ids.hand_sites.items()
         }
         self.base = self._moved.point(start)
         self.heading = start_heading + self._moved.turn  # yaw of the base's forward (x) axis
+        self.shoulder = {  # each arm's first joint
+            side: self._moved.point(data.xanchor[world.model.joint(arm.joints[0]).id].copy())
+            for side, arm in world.profile.arms.items()
+        }
+
+    def stance(self) -> tuple[float, float, float]:
+        """Where the base stands in these frames: pelvis x, y on the floor and heading (rad)."""
+        return float(self.base[0]), float(self.base[1]), self.heading
 
     def to_world(self, xy: tuple[float, float]) -> tuple[float, float]:
         """A point of the floor given as if the robot stood at its start (x, y): where it is now."""

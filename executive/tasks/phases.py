@@ -8,6 +8,8 @@ across the object's local y extent (:class:`executive.tasks.hands.HandFrames`).
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -16,9 +18,12 @@ from executive.schema.types import Body, SceneConfig
 from executive.tasks.hands import UP, HandFrames
 
 __all__ = [
+    "OneHandLayout",
+    "back_along_lane",
     "carry_lane_front",
     "grasp_height",
     "lane_carry",
+    "one_hand_layout",
     "one_hand_leg",
     "pick",
     "place",
@@ -190,27 +195,36 @@ def lane_carry(
     ]
 
 
-def one_hand_leg(
+@dataclass(frozen=True)
+class OneHandLayout:
+    """Where one hand's pick, lane carry and place go (:func:`one_hand_layout`).
+
+    ``grasp``, ``place_at``: the hand site at the pick and at the place; ``lane``: the carry lane's
+    two ends (at the pick's y and at the place's y); ``through``: the hand works behind a wall it
+    reaches past (its ``own_line``, straight ahead of its home pose, is the way in and out).
+    """
+
+    grasp: FloatArray
+    place_at: FloatArray
+    lane: tuple[FloatArray, FloatArray]
+    own_line: FloatArray
+    through: bool
+
+
+def one_hand_layout(
     h: HandFrames,
     side: str,
     body: Body,
     start: tuple[FloatArray, float],
     end: tuple[FloatArray, float],
     cfg: CompositionConfig,
-) -> list[Step]:
-    """One hand moves ``body`` from ``start`` to ``end`` (centre, yaw), both resting: pick, carry, place.
+) -> OneHandLayout:
+    """The pick, lane and place of one hand moving ``body`` from ``start`` to ``end`` (centre, yaw).
 
-    Straight, simple hand paths: up, back to the lane, across the body in that lane (the
-    carried object skirting the front of the obstacles it passes at ``obstacle_clearance``,
-    :func:`carry_lane_front`), forward over the place, down, open, up, home. A robot whose
-    profile asks for it (``return_along_lane``) first goes back along the lane to its own side
-    after placing across the body, as it is, and only then turns home: the straight way home
-    from across the body swings the arm across the body's front while the hand turns. A hand
-    that works behind a wall it reaches past (:func:`reached_through`: a glove port) goes in
-    and out along its own line, straight ahead of its home pose, and moves sideways only
-    behind the wall.
+    The lane runs in front of what the carry would pass, the carried object skirting the
+    obstacles' front at ``obstacle_clearance`` (:func:`carry_lane_front`).
     """
-    (pos, yaw), (centre, end_yaw) = start, end
+    (pos, _), (centre, _) = start, end
     grasp = np.array([pos[0], pos[1], grasp_height(body, float(pos[2]), cfg)])
     place_at = centre + (grasp[2] - pos[2]) * UP
     carry_z = max(grasp[2] + cfg.lift_height, place_at[2] + cfg.approach_height)
@@ -224,19 +238,55 @@ def one_hand_leg(
     own_line = np.array([lane_x, h.home[side].position[1], carry_z])
     span = (float(own_line[1]), float(pos[1]), float(centre[1]))
     through = reached_through(scene, (min(span), max(span)), reach, h.base[0], near, above)
-    entry: tuple[Step, ...] = ()
-    back: tuple[Step, ...] = ()
-    if through:
-        entry = (Step("move", f"{side}.reach_in", side, (h.target(side, own_line, yaw),)),)
-        back = (Step("move", f"{side}.back", side, (h.target(side, own_line, end_yaw, yaw),)),)
-    elif h.world.profile.return_along_lane and h.side_of_body(place_at) != h.side_of_body(
+    return OneHandLayout(grasp, place_at, lane, own_line, through)
+
+
+def back_along_lane(
+    h: HandFrames, side: str, layout: OneHandLayout, end_yaw: float, yaw: float
+) -> tuple[Step, ...]:
+    """The move back to the hand's own side along the lane after placing across the body, for a
+    robot whose profile asks for it (``return_along_lane``); none otherwise."""
+    place_at, lane_x = layout.place_at, float(layout.lane[0][0])
+    if not h.world.profile.return_along_lane or h.side_of_body(place_at) == h.side_of_body(
         h.home[side].position
     ):
-        back_point = np.array([lane_x, h.home[side].position[1], carry_z])
-        back = (Step("move", f"{side}.back", side, (h.target(side, back_point, end_yaw, yaw),)),)
+        return ()
+    back_point = np.array([lane_x, h.home[side].position[1], float(layout.lane[0][2])])
+    return (Step("move", f"{side}.back", side, (h.target(side, back_point, end_yaw, yaw),)),)
+
+
+def one_hand_leg(
+    h: HandFrames,
+    side: str,
+    body: Body,
+    start: tuple[FloatArray, float],
+    end: tuple[FloatArray, float],
+    cfg: CompositionConfig,
+) -> list[Step]:
+    """One hand moves ``body`` from ``start`` to ``end`` (centre, yaw), both resting: pick, carry, place.
+
+    Straight, simple hand paths: up, back to the lane, across the body in that lane (the
+    carried object skirting the front of the obstacles it passes at ``obstacle_clearance``,
+    :func:`one_hand_layout`), forward over the place, down, open, up, home. A robot whose
+    profile asks for it (``return_along_lane``) first goes back along the lane to its own side
+    after placing across the body, as it is, and only then turns home: the straight way home
+    from across the body swings the arm across the body's front while the hand turns. A hand
+    that works behind a wall it reaches past (:func:`reached_through`: a glove port) goes in
+    and out along its own line, straight ahead of its home pose, and moves sideways only
+    behind the wall.
+    """
+    (_, yaw), (_, end_yaw) = start, end
+    layout = one_hand_layout(h, side, body, start, end, cfg)
+    entry: tuple[Step, ...] = ()
+    back: tuple[Step, ...] = ()
+    if layout.through:
+        entry = (Step("move", f"{side}.reach_in", side, (h.target(side, layout.own_line, yaw),)),)
+        back = (Step("move", f"{side}.back", side, (h.target(side, layout.own_line, end_yaw, yaw),)),)
+    else:
+        back = back_along_lane(h, side, layout, end_yaw, yaw)
     return [
         *entry,
-        *pick(h, side, body.name, grasp, yaw, cfg),
-        *lane_carry(h, side, body.name, lane, (yaw + end_yaw) / 2, yaw),
-        *place(h, side, body.name, place_at, end_yaw, yaw, cfg, back),
+        *pick(h, side, body.name, layout.grasp, yaw, cfg),
+        *lane_carry(h, side, body.name, layout.lane, (yaw + end_yaw) / 2, yaw),
+        *place(h, side, body.name, layout.place_at, end_yaw, yaw, cfg, back),
     ]

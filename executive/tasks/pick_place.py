@@ -19,9 +19,11 @@ from numpy.typing import NDArray
 
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import PlanningError
+from executive.schema.declarations import Block
+from executive.schema.scene_keys import OBJECT_NAME, TARGET, TO_YAW
 from executive.schema.types import Body, SceneConfig
 from executive.schema.yaml_nodes import Node
-from executive.tasks.base import Alternative, Task, TaskKind, Verdict
+from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
 from executive.tasks.hands import ONE_HAND, UP, HandFrames, yaw_of
 from executive.tasks.phases import carry_lane_front, grasp_height, lane_carry, pick, place
 from executive.tasks.placement import placed_verdict, target_placement
@@ -80,12 +82,18 @@ class PickKind(TaskKind):
     name = "pick"
     alternative_names = ONE_HAND
     leaves_held = True
+    keys = Block(
+        "Pick an object up with one hand and keep holding it (a place puts it down)",
+        {"object": OBJECT_NAME, "alternatives": alternatives_key(ONE_HAND)},
+        required=("object",),
+        defaults={"alternatives": list(ONE_HAND)},
+    )
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``pick: {object, alternatives: [left, right]}``."""
         from executive.schema.readers import read_object
 
-        node.check_keys(("object",), ("alternatives",))
+        self.keys.check_keys(node)
         return PickTask(object=read_object(node, scene), alternatives=self.read_alternatives(node, ONE_HAND))
 
     def offered(self, task: Task, world: World) -> list[Alternative]:
@@ -177,12 +185,23 @@ class PlaceKind(TaskKind):
     name = "place"
     alternative_names = ONE_HAND
     needs_held = True
+    keys = Block(
+        "Put a held object down with the hand that holds it (an earlier pick left it there)",
+        {
+            "object": OBJECT_NAME,
+            "to": TARGET,
+            "to_yaw": TO_YAW,
+            "alternatives": alternatives_key(ONE_HAND),
+        },
+        required=("object", "to"),
+        defaults={"alternatives": list(ONE_HAND)},
+    )
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``place: {object, to: [x, y(, z)], to_yaw (deg), alternatives}``."""
         from executive.schema.readers import read_target
 
-        node.check_keys(("object", "to"), ("to_yaw", "alternatives"))
+        self.keys.check_keys(node)
         name, to, yaw = read_target(node, scene)
         return PlaceTask(
             object=name, to=to, to_yaw_rad=yaw, alternatives=self.read_alternatives(node, ONE_HAND)

@@ -28,9 +28,10 @@ from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import HandTarget, PlanningError
 from executive.planning.press_geometry import hand_lead, press_compliance, press_quat, surface_at
 from executive.schema import ranges as R
+from executive.schema.declarations import Block, Number, Text, Vector
 from executive.schema.types import SceneConfig
 from executive.schema.yaml_nodes import Node
-from executive.tasks.base import Alternative, Task, TaskKind, Verdict
+from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
 from executive.tasks.hands import HandFrames
 from executive.tasks.subtree import build_subtree
 from executive.world.model import World
@@ -84,6 +85,33 @@ class PressKind(TaskKind):
 
     name = "press"
     alternative_names = SIDES
+    keys = Block(
+        "Press a point on an obstacle (a button, a glovebox panel) with one hand, with a force, for a time",
+        {
+            "target": Text("the name of the obstacle pressed"),
+            "point": Vector(
+                "the point pressed, x y z: on the target's surface (within 5 mm), not on a face that "
+                "looks down",
+                (Number("coordinate", "m", -R.POSITION_MAX, R.POSITION_MAX),),
+                (3,),
+                ("x", "y", "z"),
+                unit="m",
+            ),
+            "force": Number("pushed into the surface along its normal", "N", 0.0, FORCE_MAX, open_low=True),
+            "duration": Number("how long the force is held", "s", 0.0, DURATION_MAX, open_low=True),
+            "tolerance": Number(
+                f"how far the force may stray while held; at most the force; absent: 10 % of the "
+                f"force, at least {MIN_TOLERANCE:g} N",
+                "N",
+                0.0,
+                FORCE_MAX,
+                open_low=True,
+            ),
+            "alternatives": alternatives_key(SIDES),
+        },
+        required=("target", "point", "force", "duration"),
+        defaults={"alternatives": list(SIDES)},
+    )
     #: m off the surface where the approach ends: the servo's tracking error on the way in
     #: (the move's 3 cm arrival tolerance is far looser) must not bump the hand into the panel
     #: before the press declares the contact.
@@ -96,9 +124,10 @@ class PressKind(TaskKind):
             ScenarioError: naming the key path: an unknown target (the obstacles listed), a point off
                 its surface or on a face that looks down, a force, duration or tolerance out of range.
         """
-        node.check_keys(("target", "point", "force", "duration"), ("tolerance", "alternatives"))
+        keys = self.keys
+        keys.check_keys(node)
         target_node = node.get("target")
-        name = target_node.string()
+        name = keys.keys["target"].read(target_node)
         bodies = {b.name: b for b in scene.obstacles}
         if name not in bodies:
             valid = ", ".join(bodies) or "(none)"
@@ -109,7 +138,7 @@ class PressKind(TaskKind):
             )
             target_node.fail(f"unknown obstacle '{name}'{hint}; the scene's obstacles are: {valid}")
         point_node = node.get("point")
-        point = point_node.numbers(3, ge=-R.POSITION_MAX, le=R.POSITION_MAX)
+        point = keys.keys["point"].read(point_node)
         surface = surface_at(bodies[name], np.array(point))
         if abs(surface.distance) > SURFACE_TOLERANCE:
             where = "outside" if surface.distance > 0 else "inside"
@@ -119,9 +148,10 @@ class PressKind(TaskKind):
             )
         if surface.normal[2] < -0.5:
             point_node.fail(f"the point is on the underside of '{name}' (its face looks down there)")
-        force = node.get("force").number(gt=0.0, le=FORCE_MAX)
-        duration = node.get("duration").number(gt=0.0, le=DURATION_MAX)
+        force = keys.read_key(node, "force")
+        duration = keys.read_key(node, "duration")
         tol_node = node.opt("tolerance")
+        # at most the force: the declared range's upper end is the largest force
         tolerance = (
             tol_node.number(gt=0.0, le=force) if tol_node is not None else max(0.1 * force, MIN_TOLERANCE)
         )

@@ -18,6 +18,7 @@ little): :meth:`PushKind.verify` checks its position only.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -28,9 +29,11 @@ from numpy.typing import NDArray
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import PlanningError
 from executive.risk.push import CONTACT_GAP, descent_gap
+from executive.schema.declarations import Block
+from executive.schema.scene_keys import OBJECT_NAME, XY
 from executive.schema.types import Body, SceneConfig
 from executive.schema.yaml_nodes import Node
-from executive.tasks.base import Alternative, Task, TaskKind, Verdict
+from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
 from executive.tasks.grasp_geometry import hand_geometry
 from executive.tasks.hands import UP, HandFrames
 from executive.world.model import World
@@ -73,16 +76,25 @@ class PushKind(TaskKind):
 
     name = "push"
     alternative_names = SIDES
+    keys = Block(
+        "Slide an object along the table to a target with one hand",
+        {
+            "object": OBJECT_NAME,
+            "to": dataclasses.replace(XY, description="where the object's centre goes: x, y over the table"),
+            "alternatives": alternatives_key(SIDES),
+        },
+        required=("object", "to"),
+        defaults={"alternatives": list(SIDES)},
+    )
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``push: {object, to: [x, y], alternatives}``; errors name the key path."""
-        from executive.schema import ranges as R
         from executive.schema.readers import over_table, read_object
 
-        node.check_keys(("object", "to"), ("alternatives",))
+        self.keys.check_keys(node)
         name = read_object(node, scene)
         to_node = node.get("to")
-        x, y = to_node.numbers(2, ge=-R.POSITION_MAX, le=R.POSITION_MAX)
+        x, y = self.keys.keys["to"].read(to_node)
         if not over_table(scene.table, x, y):
             to_node.fail(
                 f"[{x:g}, {y:g}] is not over the table: a push slides the object along the table top"

@@ -21,9 +21,10 @@ import mujoco
 
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.stepping_geometry import foothold_of, stance_of, stance_offsets, yaw_of
+from executive.schema.declarations import Block, Number, Vector
 from executive.schema.types import SceneConfig
 from executive.schema.yaml_nodes import Node
-from executive.tasks.base import Alternative, Task, TaskKind, Verdict
+from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
 from executive.world.model import World
 
 __all__ = ["STANCE_TOLERANCE", "StepKind", "StepTask", "feet_stance"]
@@ -53,13 +54,34 @@ class StepKind(TaskKind):
     name = "step"
     alternative_names = ("left_first", "right_first")
     moves_base = True
+    keys = Block(
+        "Walk to a goal stance in quasi-static steps, either foot first; later tasks plan from there",
+        {
+            "to": Vector(
+                "where the pelvis should stand on the floor, x y in the world frame",
+                (Number("coordinate", "m", -TO_MAX, TO_MAX),),
+                (2,),
+                ("x", "y"),
+                unit="m",
+            ),
+            "yaw": Number(
+                "the pelvis's heading at the goal; absent: the heading it has",
+                "deg",
+                -180.0,
+                180.0,
+                to_radians=True,
+            ),
+            "alternatives": alternatives_key(alternative_names),
+        },
+        required=("to",),
+        defaults={"alternatives": list(alternative_names)},
+    )
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``step: {to: [x, y], yaw, alternatives}``; errors name the key path."""
-        node.check_keys(("to",), ("yaw", "alternatives"))
-        x, y = node.get("to").numbers(2, ge=-TO_MAX, le=TO_MAX)
-        yaw_node = node.opt("yaw")
-        yaw = math.radians(yaw_node.number(ge=-180.0, le=180.0)) if yaw_node is not None else None
+        self.keys.check_keys(node)
+        x, y = self.keys.read_key(node, "to")
+        yaw = self.keys.read_key(node, "yaw")
         return StepTask(
             object="",
             stance=(x, y),

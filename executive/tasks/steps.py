@@ -74,14 +74,15 @@ def plan_alternative(
 
 
 def plan_walk(planner: Planner, world: World, step: Step, q: FloatArray) -> tuple[StepPlan, ...]:
-    """The footsteps of a ``step`` step from ``q``: to its ``stance``, ``step.side`` first.
+    """The footsteps of a ``step`` step from ``q``: to its ``stance``, ``step.side`` first, holding
+    ``step.carried`` (if any) where its hand has it.
 
     Raises:
         StepPlanningError: a step the legs cannot make, or a goal not reached (naming what binds).
     """
     if step.stance is None:
         raise ValueError(f"step '{step.name}' has no stance to walk to")
-    stepper = StepPlanner(world, planner_config=planner.config, problem=planner.problem)
+    stepper = StepPlanner(world, planner_config=planner.config, problem=planner.problem, carried=step.carried)
     x, y, yaw = step.stance
     goal = (x, y, stepper.pelvis(q)[2] if yaw is None else yaw)
     return tuple(plan_steps(stepper, q, goal, first=step.side or None))

@@ -1,9 +1,9 @@
 """The behaviour subtree of a planned alternative: one task-level behaviour per step.
 
 :func:`build_subtree` turns an :class:`executive.planning.plan.AlternativePlan` into a
-py_trees Sequence: a mover per motion step (each may be wrapped in a live risk guard), a
-gripper behaviour per grasp and release, and a handover (receiver grasps, giver releases,
-giver retreats) as its own subtree. It is the default of
+py_trees Sequence: a mover per motion step and a footstep per step of a walk (each may be
+wrapped in a live risk guard), a gripper behaviour per grasp and release, and a handover
+(receiver grasps, giver releases, giver retreats) as its own subtree. It is the default of
 :meth:`executive.tasks.base.TaskKind.subtree`; a kind with steps of its own passes their
 behaviours in ``make``.
 """
@@ -11,6 +11,7 @@ behaviours in ``make``.
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
+from dataclasses import replace
 
 import py_trees
 
@@ -27,13 +28,13 @@ def build_subtree(
 ) -> py_trees.composites.Sequence:
     """The alternative as a py_trees Sequence of task-level behaviours (a handover is its own subtree).
 
-    ``guard``: wrap every motion in a :class:`behaviours.guard.RiskGuard` (live risk checks,
-    active when a monitor is on the blackboard). ``make``: a task kind's own behaviour for
+    ``guard``: wrap every motion (a hand's, and each footstep of a walk) in a
+    :class:`behaviours.guard.RiskGuard` (live risk checks, active when a monitor is on the
+    blackboard). ``make``: a task kind's own behaviour for
     steps of a kind of its own (a press), by step kind.
     """
     from behaviours.gripper import Grasp, Release
     from behaviours.handover import handover_subtree
-    from behaviours.step import Step as FootStep
 
     children: list[py_trees.behaviour.Behaviour] = []
     steps = list(plan.steps)
@@ -59,8 +60,7 @@ def build_subtree(
             i += 3
             continue
         if step.kind == "step":  # a walk: one behaviour per footstep (KeyError: not planned)
-            walk = [FootStep(f"{step.name}.{k + 1}", s) for k, s in enumerate(plan.walks[step.name])]
-            children.append(py_trees.composites.Sequence(name=step.name, memory=True, children=walk))
+            children.append(_walk(plan, step, guard))
         elif step.kind == "grasp":
             children.append(Grasp(step.name, step.side, step.obj))
         elif step.kind == "release":
@@ -69,6 +69,25 @@ def build_subtree(
             children.append(_motion(plan, steps, i, guard))
         i += 1
     return py_trees.composites.Sequence(name=plan.name, memory=True, children=children)
+
+
+def _walk(plan: AlternativePlan, step: Step, guard: bool) -> py_trees.behaviour.Behaviour:
+    """A walk's footsteps in a Sequence, each following its part of the walk's trajectory (wrapped
+    in a live risk guard when ``guard``: its swing foot the guard's side; an object the walk
+    carries in a hand is the guard's carried object, on the robot's side)."""
+    from behaviours.guard import RiskGuard
+    from behaviours.step import Step as FootStep
+
+    walk = plan.trajectories.get(step.name)
+    if walk is not None and step.carried is not None and walk.carried != step.carried:
+        walk = replace(walk, carried=step.carried)  # the same knots (the guards' memo key)
+    children: list[py_trees.behaviour.Behaviour] = []
+    starts_at = 0.0
+    for k, footstep in enumerate(plan.walks[step.name]):
+        mover = FootStep(f"{step.name}.{k + 1}", footstep, walk=walk, starts_at=starts_at)
+        starts_at += footstep.duration
+        children.append(RiskGuard(mover, side=footstep.swing, kind="step", obj="") if guard else mover)
+    return py_trees.composites.Sequence(name=step.name, memory=True, children=children)
 
 
 def _motion(plan: AlternativePlan, steps: list[Step], i: int, guard: bool) -> py_trees.behaviour.Behaviour:

@@ -11,6 +11,10 @@ Alternatives (names stable; Long et al. 2018, section "Total risk"):
   picks it up there and places it (the way for an object that cannot be handed over:
   its yaw is never turned; :mod:`executive.tasks.regrasp`). Not in the default list
   (``TransferKind.default_alternatives``): it plans two one-arm legs, so ask for it by name.
+* ``left_sidestep``, ``right_sidestep``: pick with that hand, step sideways holding the object,
+  place with the same hand from where the robot then stands (:mod:`executive.tasks.sidestep`).
+  Planned only where the one-arm alternative of that hand cannot be (``instead_of``): the
+  place beyond that hand's reach from where the robot stands.
 
 A one-arm robot offers its one hand; a robot's profile may declare any of them unsupported.
 An object already in a hand (a re-plan after a failed handover) is put down by that hand
@@ -20,27 +24,32 @@ An object already in a hand (a re-plan after a failed handover) is put down by t
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import mujoco
 import numpy as np
 
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import HandTarget, PlanningError
+from executive.schema.declarations import Block
+from executive.schema.scene_keys import OBJECT_NAME, TARGET, TO_YAW
 from executive.schema.types import SceneConfig
 from executive.schema.yaml_nodes import Node
 from executive.tasks import handover as handover_steps
 from executive.tasks import regrasp as regrasp_steps
-from executive.tasks.base import Alternative, Task, TaskKind, Verdict
+from executive.tasks import sidestep as sidestep_steps
+from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
 from executive.tasks.hands import ONE_HAND, HandFrames, yaw_of
 from executive.tasks.phases import one_hand_leg
 from executive.tasks.pick_place import PlaceTask, place_steps, site_offset
 from executive.tasks.placement import placed_verdict, target_placement
 from executive.world.model import World
 
-__all__ = ["HANDOVERS", "REGRASPS", "TransferKind", "TransferTask", "transfer_steps"]
+__all__ = ["HANDOVERS", "REGRASPS", "SIDESTEPS", "TransferKind", "TransferTask", "transfer_steps"]
 
 HANDOVERS = ("left_to_right", "right_to_left")
 REGRASPS = tuple(regrasp_steps.REGRASPS)
+SIDESTEPS = tuple(sidestep_steps.SIDESTEPS)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -62,14 +71,30 @@ class TransferKind(TaskKind):
     """Move an object to a target pose: one hand, or two with a handover or a regrasp."""
 
     name = "transfer"
-    alternative_names = (*ONE_HAND, *HANDOVERS, *REGRASPS)
-    default_alternatives = ("left", "right", "left_to_right")
+    alternative_names = (*ONE_HAND, *HANDOVERS, *REGRASPS, *SIDESTEPS)
+    default_alternatives = ("left", "right", "left_to_right", *SIDESTEPS)
+    instead_of = MappingProxyType(dict(sidestep_steps.SIDESTEPS))
+    keys = Block(
+        "Move an object to a target: one hand (left, right), a handover (left_to_right, "
+        "right_to_left: the object turns a half turn), a regrasp (left_regrasp_right, "
+        "right_regrasp_left: set down near the midline and picked up by the other hand) or a "
+        "side-step (left_sidestep, right_sidestep: the hand carries it through a walk; planned only "
+        "where that hand's one-arm carry cannot be)",
+        {
+            "object": OBJECT_NAME,
+            "to": TARGET,
+            "to_yaw": TO_YAW,
+            "alternatives": alternatives_key(alternative_names),
+        },
+        required=("object", "to"),
+        defaults={"alternatives": list(default_alternatives)},
+    )
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
         """``transfer: {object, to: [x, y(, z)], to_yaw (deg), alternatives}``."""
         from executive.schema.readers import read_target
 
-        node.check_keys(("object", "to"), ("to_yaw", "alternatives"))
+        self.keys.check_keys(node)
         name, to, yaw = read_target(node, scene)
         return TransferTask(
             object=name,
@@ -85,6 +110,8 @@ class TransferKind(TaskKind):
             missing = [s for s in HANDOVERS_SIDES.get(name) or regrasp_steps.REGRASPS[name] if s not in sides]
             reason = f"robot '{world.profile.name}' has no {' and no '.join(missing)} arm" if missing else ""
             out.append(Alternative(name, reason))
+        for name, side in sidestep_steps.SIDESTEPS.items():
+            out.append(Alternative(name, _cannot_sidestep(world, side)))
         holder = world.held_by(task.object)
         if holder is None:
             return out
@@ -109,6 +136,8 @@ class TransferKind(TaskKind):
         if alternative in REGRASPS:
             first, second = regrasp_steps.REGRASPS[alternative]
             return regrasp_steps.transfer(world, task, first, second, config)
+        if alternative in SIDESTEPS:
+            return sidestep_steps.transfer(world, task, sidestep_steps.SIDESTEPS[alternative], config)
         raise PlanningError(
             alternative, None, 0.0, 0.0, 0, reason=f"transfer has no alternative '{alternative}'"
         )
@@ -119,6 +148,14 @@ class TransferKind(TaskKind):
 
 
 HANDOVERS_SIDES = {"left_to_right": ("left", "right"), "right_to_left": ("right", "left")}
+
+
+def _cannot_sidestep(world: World, side: str) -> str:
+    """Why ``side`` cannot pick, step sideways and place on this robot ("" if it can)."""
+    if side not in world.profile.sides:
+        return f"robot '{world.profile.name}' has no {side} arm"
+    feet = len(world.profile.feet)
+    return "" if feet == 2 else f"robot '{world.profile.name}' has {feet} feet; a side-step needs two"
 
 
 def one_hand_steps(world: World, task: TransferTask, side: str, cfg: CompositionConfig) -> list[Step]:
