@@ -66,9 +66,9 @@ def _right_step(world: World, planner: StepPlanner, dx: float = 0.10) -> StepPla
 
 def test_the_stance_ankles_keep_their_balance_reserve(g1: tuple[str, World, StepPlanner]) -> None:
     """In every knot of a planned G1 step each held foot's ankle hinges stay inside their range by
-    their reserve; the roll's is what a 2-sigma pelvis shift over a 0.7 m leg and the CoP at the
-    sole's 3 cm edge under 34 kg on a kp 500 servo take (about 1.6 + 1.2 deg); the torso leans
-    instead of the legs and comes back upright."""
+    their reserve; the roll's is about what a 2-sigma pelvis shift over a 0.72 m leg and the CoP
+    at the sole's 3 cm edge under 34 kg on a kp 500 servo take (by hand 1.6 + 1.2 deg); the torso
+    leans instead of the legs and comes back upright."""
     _, world, planner = g1
     limit = planner.ik.ankle_limit
     assert limit is not None
