@@ -10,15 +10,18 @@ The public entry of the step planner (see docs/stepping.md). One step of the ``s
 4. ``touchdown``: it comes down flat onto the floor;
 5. ``shift_back``: both feet on the floor, the CoM back to where the robot stood over its feet.
 
-The knees stay bent (:mod:`executive.planning.stepping_knees`), the torso upright (the
-whole-body planner's tilt limit), the pelvis above its safe posture's floor, the joints in their
-ranges and speed limits, the arms and the waist held, the swing leg clear of the stance leg and
-both legs clear of the scene. Each phase is a :class:`~executive.planning.timing.Trajectory`
-re-timed as any planned motion: minimum-jerk, the zero-moment point inside the phase's support
-polygon. A foothold the leg cannot reach is refused with a :class:`StepPlanningError` naming the
-limits that bind (``binds``). :func:`measure_reach` measures by IK how far a foot can step;
-:func:`plan_steps` walks to a goal stance in steps within a fraction of that reach, alternating
-feet. The bundled physics follows a step with :class:`behaviours.step.Step`.
+The knees stay bent (:mod:`executive.planning.stepping_knees`), the ankles of the feet on the
+floor keep a balance reserve in their range (:mod:`executive.planning.stepping_ankles`; where that
+leaves the CoM short, the torso leans over the stance foot with the waist's roll), the torso
+within the whole-body planner's tilt limit, the pelvis above its safe posture's floor, the joints
+in their ranges and speed limits, the arms and otherwise the waist held, the swing leg clear of
+the stance leg and both legs clear of the scene. Each phase is a
+:class:`~executive.planning.timing.Trajectory` re-timed as any planned motion: minimum-jerk, the
+zero-moment point inside the phase's support polygon. A foothold the leg cannot reach is refused
+with a :class:`StepPlanningError` naming the limits that bind (``binds``). :func:`measure_reach`
+measures by IK how far a foot can step; :func:`plan_steps` walks to a goal stance in steps within
+a fraction of that reach, alternating feet. The bundled physics follows a step with
+:class:`behaviours.step.Step`.
 
 Usage::
 
