@@ -189,3 +189,25 @@ def test_decision_scores_leave_out_failed_dry_runs_and_score_both_on_the_rest() 
     assert d["fused"]["any"]["auc"] == pytest.approx(roc_auc(fused, y)) == 1.0
     assert d["fused"]["any"]["ece"] == pytest.approx(expected_calibration_error(fused, y))
     assert d["analytic"]["any"]["ece"] == pytest.approx(expected_calibration_error(np.full(3, 0.5), y))
+
+
+def test_the_command_resumes_a_campaign_only_the_way_it_was_made(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    from executive.cli.main import main
+    from executive.validation.campaign_folder import campaign_config
+
+    base = load("book_transfer")
+    names = list(base.mission[0].alternatives)
+    config = campaign_config(base, base.trials.seed, 0, names, 1, decide=False)
+    (tmp_path / "campaign.json").write_text(json.dumps(config))
+    assert (
+        main(["campaign", "book_transfer", "--trials", "1", "--decide", "--resume", "--out", str(tmp_path)])
+        == 2
+    )
+    assert "predicts on the estimate; resume it without --decide" in capsys.readouterr().err
+    config = campaign_config(base, base.trials.seed, 0, names, 1, decide=True)
+    (tmp_path / "campaign.json").write_text(json.dumps(config))
+    args = ["campaign", "book_transfer", "--trials", "1", "--decide", "--rollouts", "2", "--resume"]
+    assert main([*args, "--out", str(tmp_path)]) == 2
+    assert "decided with 4 rollouts per alternative; this run asks for 2" in capsys.readouterr().err

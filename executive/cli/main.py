@@ -363,11 +363,12 @@ def _print_plan(
 
 
 def _cmd_campaign(args: argparse.Namespace) -> int:
+    from executive.decision.physics_check import with_rollouts
     from executive.validation.campaign import run_campaign, table_text
 
     _check_jobs(args)
     _check_out(args)
-    scenario = _load(args.scenario)
+    scenario = with_rollouts(_load(args.scenario), args.rollouts)
     alternatives = [a.strip() for a in args.alternatives.split(",")] if args.alternatives else None
     result = run_campaign(
         scenario,
@@ -393,11 +394,15 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         print(
             f"executive campaign: interrupted; {len(result.records)} trial(s) kept. Complete it with: "
             f"executive campaign {args.scenario} --trials {result.summary['trials_per_alternative']} "
-            f"{'--decide ' if args.decide else ''}--resume --out {result.folder}",
+            f"{'--decide ' if args.decide else ''}{_rollouts_option(args)}--resume --out {result.folder}",
             file=sys.stderr,
         )
         return EXIT_FAILED
     return EXIT_OK
+
+
+def _rollouts_option(args: argparse.Namespace) -> str:
+    return "" if args.rollouts is None else f"--rollouts {args.rollouts} "
 
 
 def _check_jobs(args: argparse.Namespace) -> None:
@@ -602,6 +607,7 @@ def _add_campaign(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--task", type=_TASK, default=0, help="index of the mission's task (default 0)")
     p.add_argument("--alternatives", help="comma-separated subset of the task's alternatives (default: all)")
     p.add_argument("--decide", action="store_true", help=_DECIDE_HELP)
+    p.add_argument("--rollouts", type=_ROLLOUTS, metavar="N", help=_ROLLOUTS_HELP)
     p.set_defaults(func=_cmd_campaign)
 
 
