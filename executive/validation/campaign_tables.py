@@ -2,9 +2,10 @@
 
 :func:`table_text` (what ``executive campaign`` prints) and :func:`table_markdown`
 (``table.md``) show, per alternative, each failure mode's predicted probability and each
-verdict's observed rate with the failures' 95% interval, then the scores per failure mode;
-their columns come from the failure-mode table. :func:`reliability_figure` draws
-``reliability.png``.
+verdict's observed rate with the failures' 95% interval, then the scores per failure mode,
+the fused and the analytic scores side by side for a campaign that decided per trial, and the
+regret of the per-trial choice; their columns come from the failure-mode table.
+:func:`reliability_figure` draws ``reliability.png``.
 """
 
 from __future__ import annotations
