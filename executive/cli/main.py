@@ -363,11 +363,12 @@ def _print_plan(
 
 
 def _cmd_campaign(args: argparse.Namespace) -> int:
+    from executive.decision.physics_check import with_rollouts
     from executive.validation.campaign import run_campaign, table_text
 
     _check_jobs(args)
     _check_out(args)
-    scenario = _load(args.scenario)
+    scenario = with_rollouts(_load(args.scenario), args.rollouts)
     alternatives = [a.strip() for a in args.alternatives.split(",")] if args.alternatives else None
     result = run_campaign(
         scenario,
@@ -380,6 +381,7 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         task_index=args.task,
         alternatives=alternatives,
         stream=sys.stdout,
+        decide=args.decide,
     )
     print(table_text(result.summary))
     rate = result.trials_per_s
@@ -392,11 +394,15 @@ def _cmd_campaign(args: argparse.Namespace) -> int:
         print(
             f"executive campaign: interrupted; {len(result.records)} trial(s) kept. Complete it with: "
             f"executive campaign {args.scenario} --trials {result.summary['trials_per_alternative']} "
-            f"--resume --out {result.folder}",
+            f"{'--decide ' if args.decide else ''}{_rollouts_option(args)}--resume --out {result.folder}",
             file=sys.stderr,
         )
         return EXIT_FAILED
     return EXIT_OK
+
+
+def _rollouts_option(args: argparse.Namespace) -> str:
+    return "" if args.rollouts is None else f"--rollouts {args.rollouts} "
 
 
 def _check_jobs(args: argparse.Namespace) -> None:
@@ -425,6 +431,7 @@ def _cmd_fidelity(args: argparse.Namespace) -> int:
         rollouts=args.rollouts,
         resume=args.resume,
         stream=sys.stdout,
+        decide=args.decide,
     )
     print(table_text(result.summary))
     print(f"suite folder {result.folder} (summary.json, table.md, reliability.png, variant-KK.yaml and -KK/)")
@@ -432,7 +439,8 @@ def _cmd_fidelity(args: argparse.Namespace) -> int:
         print(
             f"executive fidelity: interrupted. Complete it with: executive fidelity {args.scenario} "
             f"--variants {args.variants} --trials {args.trials} --seed {result.summary['seed']} "
-            f"--rollouts {args.rollouts} --resume --out {result.folder}",
+            f"--rollouts {result.summary['rollouts']}{' --decide' if args.decide else ''} --resume "
+            f"--out {result.folder}",
             file=sys.stderr,
         )
         return EXIT_FAILED
@@ -472,6 +480,10 @@ _SCENARIO_HELP = "a scenario file path, or the name of a bundled scenario (see `
 _ROLLOUTS_HELP = (
     "physics rollouts per alternative on truths sampled from the uncertainty (overrides the "
     "scenario's risk.rollouts.count; 0: off, the dry runs still run)"
+)
+_DECIDE_HELP = (
+    "each trial first decides as the executive does, on its own estimate (plans, analytic risk, "
+    "dry runs, risk.rollouts rollouts, fusion); its records score the numbers it decided with"
 )
 _THRESHOLD_HELP = (
     "override risk.threshold: above it the lowest-risk alternative needs approval (>= 0 and below "
@@ -594,6 +606,8 @@ def _add_campaign(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument("--seed", type=_SEED, default=None, help="seed of trial 0 (default: trials.seed)")
     p.add_argument("--task", type=_TASK, default=0, help="index of the mission's task (default 0)")
     p.add_argument("--alternatives", help="comma-separated subset of the task's alternatives (default: all)")
+    p.add_argument("--decide", action="store_true", help=_DECIDE_HELP)
+    p.add_argument("--rollouts", type=_ROLLOUTS, metavar="N", help=_ROLLOUTS_HELP)
     p.set_defaults(func=_cmd_campaign)
 
 
@@ -618,9 +632,10 @@ def _add_fidelity(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
     p.add_argument(
         "--rollouts",
         type=_ROLLOUTS,
-        default=0,
-        help="risk.rollouts.count of every variant (default 0: off, whatever the scenario says)",
+        default=None,
+        help="risk.rollouts.count of every variant (default: the scenario's with --decide, else 0: off)",
     )
+    p.add_argument("--decide", action="store_true", help=_DECIDE_HELP)
     p.add_argument("--resume", action="store_true", help="complete the suite in --out DIR")
     p.set_defaults(func=_cmd_fidelity)
 

@@ -457,12 +457,15 @@ class PhysicsCheck:
 
     Args:
         jobs: worker processes (``risk.rollouts.jobs``).
+        run_map: runs the physics jobs instead of the pool (e.g. in the calling process, as a
+            campaign's worker does); None: the pool's ``jobs`` worker processes.
 
     Use :meth:`check` on a decision's assessed alternatives; :meth:`close` when done.
     """
 
-    def __init__(self, jobs: int) -> None:
+    def __init__(self, jobs: int, run_map: RunMap | None = None) -> None:
         self.pool = RolloutPool(jobs)
+        self.run_map: RunMap = self.pool if run_map is None else run_map
 
     def check(
         self, world: World, results: Sequence[AlternativeRisk], q_start: np.ndarray | None = None
@@ -473,7 +476,7 @@ class PhysicsCheck:
         analytic = {a.name: a.risk for a in feasible if a.risk is not None}
         scenario = estimate_scenario(world)
         verdict = (
-            check_alternatives(plans, analytic, scenario, self.pool, q_start=q_start)
+            check_alternatives(plans, analytic, scenario, self.run_map, q_start=q_start)
             if plans
             else PhysicsVerdict({})
         )

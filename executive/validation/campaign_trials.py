@@ -18,7 +18,7 @@ from executive.schema.types import Scenario, SceneVariation
 from executive.validation.campaign_predictions import Prediction, predict
 from executive.world.model import Perturbation
 
-__all__ = ["run_trial", "trial_scene", "trial_seed", "vary_scene"]
+__all__ = ["execute_trial", "run_trial", "trial_record", "trial_scene", "trial_seed", "vary_scene"]
 
 
 def trial_seed(base_seed: int, index: int) -> int:
@@ -109,13 +109,33 @@ def run_trial(
     alternative (planning is deterministic: planning again per trial gives the same plan);
     None: plan it here, on the trial's own scene, as a scenario with a scene variation needs.
     """
-    from executive.execution.runner import error_fields, execute_plan, outcome_fields
-    from executive.world.model import build
-
     estimate, perturbation, shifts = trial_scene(scenario, seed)
     if prediction is None or shifts is not None:
         prediction = predict(estimate, task_index, alternative)
-    record: dict[str, Any] = {
+    record = trial_record(index, alternative, seed, _predicted(prediction), shifts, perturbation)
+    if not prediction.feasible:
+        record["failure"] = {"mode": "infeasible", "detail": prediction.error}
+        return record
+    return execute_trial(record, prediction.plan, estimate, perturbation, task_index)
+
+
+def trial_record(
+    index: int,
+    alternative: str,
+    seed: int,
+    predicted: dict[str, Any] | None,
+    shifts: dict[str, Any] | None,
+    perturbation: Perturbation,
+) -> dict[str, Any]:
+    """A trial's record before it runs: outcome ``infeasible`` until :func:`execute_trial` runs it.
+
+    Args:
+        index, alternative, seed: which trial.
+        predicted: its predicted risk (per-mode probabilities, ``value``; None: it did not plan).
+        shifts: the trial's scene variation (None: the scenario's scene).
+        perturbation: the truth's perturbation.
+    """
+    return {
         "trial": index,
         "alternative": alternative,
         "seed": seed,
@@ -123,16 +143,33 @@ def run_trial(
         "failure": None,
         "placement_error_m": None,
         "sim_time_s": 0.0,
-        "predicted": _predicted(prediction),
+        "predicted": predicted,
         "scene": shifts,
         "truth": _perturbation_json(asdict(perturbation)),
     }
-    if not prediction.feasible:
-        record["failure"] = {"mode": "infeasible", "detail": prediction.error}
-        return record
+
+
+def execute_trial(
+    record: dict[str, Any], plan: Any, estimate: Scenario, perturbation: Perturbation, task_index: int
+) -> dict[str, Any]:
+    """``record`` with the outcome of ``plan`` executed in physics on the truth of ``perturbation``.
+
+    The alternative is forced: no selection, no approval, no live guards. A trial whose code
+    raises records outcome ``error`` (a defect; counted, never hidden).
+
+    Args:
+        record: the trial's record (:func:`trial_record`), updated and returned.
+        plan: the alternative's plan (an :class:`~executive.planning.plan.AlternativePlan`).
+        estimate: the trial's estimate (the truth is built from it and ``perturbation``).
+        perturbation: the truth's perturbation.
+        task_index: the task of ``estimate``'s mission the plan does.
+    """
+    from executive.execution.runner import error_fields, execute_plan, outcome_fields
+    from executive.world.model import build
+
     try:
         truth = build(estimate, perturbation, kind="truth")
-        result = execute_plan(prediction.plan, truth, estimate.mission[task_index])
+        result = execute_plan(plan, truth, estimate.mission[task_index])
     except Exception as exc:  # a defect in a trial must not end the campaign; it is counted
         record.update(error_fields(exc))
         return record
