@@ -31,6 +31,7 @@ from executive.world.model import World, build, sample_perturbation
 __all__ = [
     "RunResult",
     "behaviour_failure",
+    "end_errors",
     "error_fields",
     "execute_plan",
     "outcome_fields",
@@ -57,6 +58,9 @@ class RunResult:
     max_tick_s: float = 0.0
     statuses: list[str] = field(default_factory=list)  # root status after each tick, run-length encoded
     placement_error_m: float | None = None
+    placement_offset: tuple[float, float] | None = None  # where the object rests less its target (x, y; m)
+    #: per move that ended, per hand: where its site ended less its planned end (m, world frame)
+    end_errors: dict[str, dict[str, list[float]]] = field(default_factory=dict)
 
     @property
     def success(self) -> bool:
@@ -103,6 +107,7 @@ def execute_plan(
             break
         robot.advance()
     result.wall_s = time.perf_counter() - start
+    result.end_errors = end_errors(root)
     result.physics_wall_s = robot.stats.physics_wall_s
     result.sim_time_s = float(truth.data.time)
     if root.status == Status.SUCCESS:
@@ -119,6 +124,17 @@ def execute_plan(
         result.message = f"not finished after {limit:.1f} s of simulated time"
     tree.shutdown()
     return result
+
+
+def end_errors(root: py_trees.behaviour.Behaviour) -> dict[str, dict[str, list[float]]]:
+    """Per hand move of ``root``'s tree that ended, per hand, its end error (executed less
+    planned, m): what the moves measured of their tracking (:attr:`MoveHand.end_error`)."""
+    out: dict[str, dict[str, list[float]]] = {}
+    for behaviour in root.iterate():
+        error = getattr(behaviour, "end_error", None)
+        if error is not None:
+            out[behaviour.name] = {side: [round(float(v), 6) for v in e] for side, e in error.items()}
+    return out
 
 
 def hold_from_start(robot: SimulatedRobot, held: dict[str, str]) -> None:
@@ -144,6 +160,7 @@ def _verify(result: RunResult, task: Task, truth: World, detector: FailureDetect
     if to is not None and task.object:
         pos = truth.data.xpos[truth.ids.object_bodies[task.object]]
         result.placement_error_m = float(np.hypot(pos[0] - to[0], pos[1] - to[1]))
+        result.placement_offset = (float(pos[0] - to[0]), float(pos[1] - to[1]))
     if verdict is None or verdict.ok:
         done = (
             f"{task.object} placed at the target" if verdict is not None and verdict.event == "placed" else ""
@@ -160,14 +177,17 @@ def behaviour_failure(behaviour: py_trees.behaviour.Behaviour | None, time_s: fl
     The verdict is one of the failure-mode table's (:mod:`executive.schema.failure_modes`):
     ``drop`` (a grasp that holds nothing), ``tracking`` (a hand stalled short of its plan),
     ``guard``, ``task`` (a press whose force was not reached). A behaviour that fails without
-    one did not do its task: ``task``.
+    one did not do its task: ``task``. The detail is the behaviour's name and its message (a
+    behaviour's message never repeats its own name).
 
     Raises:
         ExecutiveError: the verdict is not in the table.
     """
     verdict = str(getattr(behaviour, "verdict", "") or "task")
     mode_of_verdict(verdict)  # raises for a verdict the table does not know
-    return Failure(verdict, behaviour.feedback_message if behaviour is not None else "", time_s)
+    if behaviour is None:
+        return Failure(verdict, "", time_s)
+    return Failure(verdict, f"{behaviour.name}: {behaviour.feedback_message}", time_s)
 
 
 def run_alternative(
@@ -206,14 +226,19 @@ def error_fields(exc: BaseException) -> dict[str, Any]:
 
 
 def outcome_fields(result: RunResult) -> dict[str, Any]:
-    """What a physics run's record says of its outcome: outcome, failure, sim time, placement error.
+    """What a physics run's record says of its outcome: outcome, failure, sim time, placement error,
+    and the moves' end errors (``end_errors``, :func:`end_errors`).
 
     ``outcome`` is ``success``, ``timeout`` or the verdict of the failure (a detector's or a
     behaviour's; ``task`` when the run failed without one).
     """
     out: dict[str, Any] = {"sim_time_s": round(result.sim_time_s, 6)}
+    if result.end_errors:
+        out["end_errors"] = result.end_errors
     if result.placement_error_m is not None:
         out["placement_error_m"] = round(result.placement_error_m, 6)
+    if result.placement_offset is not None:
+        out["placement_offset"] = [round(v, 6) for v in result.placement_offset]
     if result.outcome == "success":
         out["outcome"] = "success"
     elif result.outcome == "timeout":

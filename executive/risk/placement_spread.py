@@ -1,0 +1,126 @@
+"""Where a set-down leaves an object: the grip's error along the jaws plus what execution adds.
+
+A grasp leaves the object's error along the jaws ``l`` in the hand (closing does not correct
+it), and a pinch shifts it across them (:mod:`executive.risk.pinch`). Execution adds the
+hand's error at the end of the place move and what the release and the moves before it do to
+the object (:class:`ExecutionSpread`: a bias and an isotropic spread in the table plane). The
+object then rests at ``l a + shift + h`` from its target (``a`` the jaws' axis in the table
+plane), misplaced beyond the detector's tolerance.
+
+:func:`misplace_probability` gives P(|l| > the grasp's lateral tolerance, or misplaced): the
+grasp's lateral failure and the misplacement are one event of ``l`` and ``h``, integrated over
+``l`` (Gauss-Legendre inside the lateral tolerance) with ``h``'s part a non-central chi-square
+tail of 2 degrees of freedom (the Rice distribution; Johnson, Kotz & Balakrishnan, 1995,
+ch. 29). Without execution error it is the closed form of :mod:`executive.risk.pinch`.
+
+Usage::
+
+    spread = ExecutionSpread(np.array([0.003, -0.001]), 0.003)
+    p = misplace_probability(0.0, 0.01, 0.05, np.array([1.0, 0.0]), np.zeros(2), spread, 0.02)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+
+from executive.risk.gaussian import exceed_probability
+from executive.risk.pinch import placement_tolerance
+
+__all__ = [
+    "MEASURED_PLACEMENT_SIGMA",
+    "SET_DOWN_SIGMA",
+    "ExecutionSpread",
+    "gaussian_exceed",
+    "misplace_probability",
+]
+
+FloatArray = NDArray[np.float64]
+
+#: m per axis: where a set-down leaves the object beyond the hand's predicted error at the place,
+#: before a dry run measured it: the release, the retreat and the moves' unmodelled errors
+#: (docs/risk_models.md, "Placement spread").
+SET_DOWN_SIGMA = 0.002
+#: m per axis: where a set-down leaves the object from truth to truth about where the dry run
+#: left it, beyond the grip's error along the jaws (docs/risk_models.md, "Placement spread").
+MEASURED_PLACEMENT_SIGMA = 0.002
+
+
+@dataclass(frozen=True)
+class ExecutionSpread:
+    """What execution adds to an object's resting place, in the table plane (world x, y).
+
+    bias: (2,) m, systematic (the hand's predicted end error at the place, or the offset a dry
+        run measured); sigma: m per axis, isotropic, from truth to truth.
+    """
+
+    bias: FloatArray
+    sigma: float
+
+    @property
+    def none(self) -> bool:
+        """No execution error at all (the grip's error alone places the object)."""
+        return self.sigma == 0.0 and not np.any(self.bias)
+
+
+def misplace_probability(
+    lateral_mean: float,
+    lateral_sigma: float,
+    lateral_tolerance: float,
+    axis: FloatArray,
+    shift: FloatArray,
+    spread: ExecutionSpread,
+    tolerance: float,
+    order: int = 64,
+) -> float:
+    """P(|l| > lateral_tolerance, or |l axis + shift + h| > tolerance).
+
+    Args:
+        lateral_mean, lateral_sigma: the grip's error along the jaws, ``l ~ N(mean, sigma^2)`` (m).
+        lateral_tolerance: beyond it the grasp itself fails (m; inf: it does not).
+        axis: (2,) unit vector of the jaws' axis in the table plane.
+        shift: (2,) the pinch's shift of the object in the table plane (m).
+        spread: the execution's bias and spread (``h ~ N(bias, sigma^2 I_2)``).
+        tolerance: the detector's placement tolerance (m).
+        order: Gauss-Legendre nodes over ``l`` within the lateral tolerance.
+    """
+    axis = np.asarray(axis, dtype=float)
+    shift = np.asarray(shift, dtype=float)
+    if spread.none and abs(float(axis @ shift)) < 1e-12:  # nested events of one Gaussian: exact
+        mu = float(np.linalg.norm(shift))
+        bound = min(lateral_tolerance, placement_tolerance(tolerance, mu))
+        return float(exceed_probability(bound, lateral_sigma, lateral_mean))
+    centre = shift + spread.bias
+    if lateral_sigma == 0.0:
+        if abs(lateral_mean) > lateral_tolerance:
+            return 1.0
+        return float(_misplaced(lateral_mean * axis + centre, spread.sigma, tolerance))
+    grasp = float(exceed_probability(lateral_tolerance, lateral_sigma, lateral_mean))
+    low = max(-lateral_tolerance, lateral_mean - 9.0 * lateral_sigma)
+    high = min(lateral_tolerance, lateral_mean + 9.0 * lateral_sigma)
+    if high <= low:
+        return min(1.0, grasp)
+    x, w = np.polynomial.legendre.leggauss(order)
+    ell = 0.5 * (high - low) * x + 0.5 * (high + low)
+    density = np.exp(-0.5 * ((ell - lateral_mean) / lateral_sigma) ** 2) / (
+        lateral_sigma * np.sqrt(2.0 * np.pi)
+    )
+    placed = _misplaced(ell[:, None] * axis[None, :] + centre[None, :], spread.sigma, tolerance)
+    inside = 0.5 * (high - low) * float(w @ (density * placed))
+    return float(np.clip(grasp + inside, 0.0, 1.0))
+
+
+def _misplaced(centre: FloatArray, sigma: float, tolerance: float) -> FloatArray:
+    """P(|c + h| > tolerance) for h ~ N(0, sigma^2 I_2), per row of ``centre`` (the Rice tail)."""
+    distance = np.linalg.norm(np.atleast_2d(centre), axis=-1)
+    if sigma == 0.0:
+        return (distance > tolerance).astype(float)
+    return np.asarray(stats.ncx2.sf((tolerance / sigma) ** 2, 2, (distance / sigma) ** 2), dtype=float)
+
+
+def gaussian_exceed(mean: FloatArray, sigma: float, tolerance: float) -> float:
+    """P(|m + e| > tolerance) for e ~ N(0, sigma^2 I_2) (a grip's isotropic error and the bias)."""
+    return float(_misplaced(np.asarray(mean, dtype=float), sigma, tolerance)[0])
