@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from executive.planning.restance import LocalReplanner
 from executive.schema.types import Scenario, SceneVariation
 from executive.validation.campaign_predictions import Prediction, predict
 from executive.world.model import Perturbation
@@ -103,7 +104,9 @@ def run_trial(
     ``fall``, ``drop``, ``unstable``, or a verdict no mode predicts (``tracking``, ``task``,
     ``timeout``: not finished in the time limit; :mod:`executive.schema.failure_modes`);
     ``infeasible`` when the alternative does not plan (nothing is executed) and ``error`` when
-    the trial's code raised (a defect; counted, never hidden).
+    the trial's code raised (a defect; counted, never hidden). What follows a walk inside the
+    plan is re-planned from the stance the robot measures (its odometry seeded by the trial),
+    its risk checked as a mission would (:func:`_replanner`); the record's ``restance`` says how.
 
     ``prediction``: the alternative planned on the scenario's fixed estimate, once per
     alternative (planning is deterministic: planning again per trial gives the same plan);
@@ -132,12 +135,28 @@ def run_trial(
         return record
     try:
         truth = build(estimate, perturbation, kind="truth")
-        result = execute_plan(prediction.plan, truth, estimate.mission[task_index])
+        replanner = _replanner(estimate, prediction)
+        result = execute_plan(
+            prediction.plan, truth, estimate.mission[task_index], replanner=replanner, seed=seed
+        )
     except Exception as exc:  # a defect in a trial must not end the campaign; it is counted
         record.update(error_fields(exc))
         return record
     record.update(outcome_fields(result))
     return record
+
+
+def _replanner(estimate: Scenario, prediction: Prediction) -> LocalReplanner:
+    """What follows a walk inside the plan is re-planned from the measured stance on the trial's
+    estimate, its risk checked as a mission checks it: against the prediction's value, approved
+    (forced) at that value or the threshold if higher."""
+    from executive.decision.restance import Approval, RiskRecheck
+
+    risk = estimate.risk
+    if prediction.value is None:
+        return LocalReplanner(estimate)
+    approval = Approval.of(prediction.value, risk.threshold, risk.ordering)
+    return LocalReplanner(estimate, check=RiskRecheck(approval))
 
 
 def _predicted(prediction: Prediction) -> dict[str, Any] | None:
