@@ -4,8 +4,10 @@
 on after it (a side-step's transfer and place). Its first tick measures the base
 (:func:`executive.world.observation.measure_base`) and asks the re-planner on the blackboard
 (``/executive/replanner``, a :class:`executive.planning.restance.Replanner`) for the rest of the
-composition planned again from the measured stance; the robot holds the walk's last targets
-meanwhile. Then:
+composition planned again from the measured stance. It measures once the base has come to rest:
+when the walk ends the balance feedback lets go of the pelvis, which sways over the feet for a
+second or two (docs/task_kinds.md, "Acting from the measured stance"). The robot holds the walk's
+last targets meanwhile. Then:
 
 * re-planned: each following mover gets its new trajectory and the behaviour succeeds;
 * refused (the rest does not plan from there, or its risk exceeds what was approved): the robot
@@ -22,6 +24,7 @@ import math
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
 import py_trees
 
 from behaviours.robot_access import NAMESPACE, RobotBehaviour
@@ -58,9 +61,23 @@ class Restance(RobotBehaviour):
             (:func:`executive.planning.restance.rest_after`).
         movers: step name -> the behaviour that follows that step's trajectory (its ``trajectory``
             attribute is replaced by the re-planned one), for every step of ``rest`` that moves.
+        still_speed: the base is at rest while its horizontal speed is at most this (m/s) ...
+        still_s: ... for this long (s); then it is measured.
+        settle_s: the longest wait (s): a base still moving then is measured as it is (the record
+            says ``still`` false).
     """
 
-    def __init__(self, name: str, *, walk: str, rest: AlternativePlan, movers: Mapping[str, Any]) -> None:
+    def __init__(
+        self,
+        name: str,
+        *,
+        walk: str,
+        rest: AlternativePlan,
+        movers: Mapping[str, Any],
+        still_speed: float = 0.005,
+        still_s: float = 0.5,
+        settle_s: float = 4.0,
+    ) -> None:
         super().__init__(name)
         missing = sorted(set(rest.trajectories) - set(movers))
         if missing:
@@ -70,23 +87,42 @@ class Restance(RobotBehaviour):
         self.rest = rest
         self.movers = dict(movers)
         self.bb.register_key(REPLANNER_KEY, access=py_trees.common.Access.READ)
+        self.still_speed, self.still_s, self.settle_s = still_speed, still_s, settle_s
         self.record: dict[str, Any] | None = None  # the log's restance line, once answered
         self._request: RestanceRequest | None = None
         self._replanner: Any = None
+        self._t0 = 0.0  # robot time when the walk ended
+        self._moving_at = 0.0  # robot time the base was last seen moving
 
     def initialise(self) -> None:
         self.record, self._request = None, None
         self._replanner = self.bb.get(REPLANNER_KEY) if self.bb.exists(REPLANNER_KEY) else None
+        self._t0 = self._moving_at = self.robot.time
+
+    def _still(self, robot: Any) -> bool | None:
+        """True once the base has been at rest for ``still_s``; False when ``settle_s`` has passed
+        first (measure anyway); None: wait."""
+        t = robot.time
+        velocity = np.asarray(robot.data.qvel, dtype=float)[robot.world.base_qvel]
+        if float(np.hypot(velocity[0], velocity[1])) > self.still_speed:
+            self._moving_at = t
+        if t - self._moving_at >= self.still_s:
+            return True
+        return False if t - self._t0 >= self.settle_s else None
 
     def update(self) -> Status:
         robot = self.robot
         if self.failed_by_detector(robot):
             return Status.FAILURE
         if self._request is None:
+            still = self._still(robot)
+            if still is None:
+                self.feedback_message = f"{self.name}: standing still before measuring the base"
+                return Status.RUNNING
             position, quat = measure_base(robot.world, robot)
             base = planned_start(self.rest)[robot.world.base_qpos]
             offset = StanceOffset(stance_of(base[:3], base[3:]), stance_of(position, quat))
-            self._request = RestanceRequest(self.rest, self.walk, offset)
+            self._request = RestanceRequest(self.rest, self.walk, offset, robot.time - self._t0, still)
             if self._replanner is None:
                 self.record = restance_fields(self._request, None)
                 self.feedback_message = f"{self.name}: no re-planner; the rest runs as planned"

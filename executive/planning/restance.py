@@ -156,11 +156,15 @@ def planned_start(rest: AlternativePlan) -> FloatArray:
 @dataclass(frozen=True)
 class RestanceRequest:
     """What is asked after a walk: the rest of the alternative as planned (:func:`rest_after`), and
-    where the base stands against where it was planned to (``offset``). ``walk``: the walk's step name."""
+    where the base stands against where it was planned to (``offset``). ``walk``: the walk's step
+    name; ``waited_s``: how long the robot stood after the walk before it measured (``still``:
+    whether its base had come to rest by then)."""
 
     rest: AlternativePlan
     walk: str
     offset: StanceOffset
+    waited_s: float = 0.0
+    still: bool = True
 
     @property
     def start(self) -> FloatArray:
@@ -306,6 +310,7 @@ def restance_fields(request: RestanceRequest, result: RestanceResult | None) -> 
     re-planner: the rest runs as planned).
     """
     out: dict[str, Any] = {"walk": request.walk, **request.offset.as_dict()}
+    out["waited_s"], out["still"] = request.waited_s, request.still
     out["steps"] = [s.name for s in request.rest.steps if s.name in request.rest.trajectories]
     if result is None:
         out["outcome"] = "open_loop"
