@@ -37,7 +37,7 @@ from executive.decision.assessment import AlternativeRisk, assess_task
 from executive.decision.physics_check import PhysicsCheck, PhysicsVerdict
 from executive.decision.restance import Approval, RiskRecheck
 from executive.errors import ExecutiveError
-from executive.planning.restance import RestanceRequest, RestanceResult, replan
+from executive.planning.restance import RestanceRequest, RestanceResult, defect, replan
 from executive.schema.types import Task
 from executive.world.model import Grip, World
 
@@ -305,8 +305,7 @@ class Planning:
             check = RiskRecheck(job.approval, collision) if job.approval is not None else None
             return replan(planner, self.estimate, job.request, check)
         except Exception as exc:  # a defect: the rest must not run on it
-            defect = f"{type(exc).__name__}: {exc}"
-            return RestanceResult(reason=f"re-planning raised {defect} (a defect: please report it)")
+            return defect(exc)
 
     def _prepare(self, task: Task, feasible: list[AlternativeRisk]) -> tuple[PreparedKnots, ...]:
         """The guard distances of the lowest-risk alternative's planned knots, per motion step.

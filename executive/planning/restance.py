@@ -47,6 +47,7 @@ __all__ = [
     "RestanceResult",
     "Stance",
     "StanceOffset",
+    "defect",
     "planned_start",
     "replan",
     "replan_rest",
@@ -270,6 +271,11 @@ def replan(
     return RestanceResult({} if reason else trajectories, reason, risk, plan_s)
 
 
+def defect(exc: BaseException) -> RestanceResult:
+    """The answer to a re-plan whose code raised (a defect, not a reason of the plan's): refused."""
+    return RestanceResult(reason=f"re-planning raised {type(exc).__name__}: {exc} (a defect: please report it)")
+
+
 class LocalReplanner:
     """A :class:`Replanner` in the ticking process: :meth:`submit` re-plans at once (the tick blocks).
 
@@ -289,11 +295,14 @@ class LocalReplanner:
         self._result: RestanceResult | None = None
 
     def submit(self, request: RestanceRequest) -> None:
-        if not isinstance(self._estimate, World):
-            self._estimate = build(self._estimate)
-        if self._planner is None:
-            self._planner = Planner(self._estimate)
-        self._result = replan(self._planner, self._estimate, request, self.check)
+        try:
+            if not isinstance(self._estimate, World):
+                self._estimate = build(self._estimate)
+            if self._planner is None:
+                self._planner = Planner(self._estimate)
+            self._result = replan(self._planner, self._estimate, request, self.check)
+        except Exception as exc:  # a defect: the rest must not run on it
+            self._result = defect(exc)
 
     def poll(self) -> RestanceResult | None:
         result, self._result = self._result, None
