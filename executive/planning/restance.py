@@ -273,7 +273,8 @@ def replan(
 
 def defect(exc: BaseException) -> RestanceResult:
     """The answer to a re-plan whose code raised (a defect, not a reason of the plan's): refused."""
-    return RestanceResult(reason=f"re-planning raised {type(exc).__name__}: {exc} (a defect: please report it)")
+    raised = f"{type(exc).__name__}: {exc}"
+    return RestanceResult(reason=f"re-planning raised {raised} (a defect: please report it)")
 
 
 class LocalReplanner:
