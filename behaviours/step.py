@@ -197,6 +197,7 @@ class Step(RobotBehaviour):
         self._balance: Any = None
         self._carried: tuple[str, str] | None = None
         self._held = ""  # what hold_safely did, in words
+        self._slipped_in = ""  # the phase a slip came in
         self.slipped: Any = None  # the detector's Failure the step held after (HELD_VERDICTS)
 
     @property
@@ -265,18 +266,23 @@ class Step(RobotBehaviour):
         if failure.mode not in HELD_VERDICTS or self.slipped is not None:
             self.failed_by_detector(robot)
             if self.slipped is not None:  # a second failure on the way to the hold
-                self.feedback_message += f" (holding after {self.slipped.detail}; {self._held})"
+                self.feedback_message += f" (holding after {self._slip_line()})"
             return Status.FAILURE
+        self._slipped_in = self.phase.name
         self.slipped = robot.detector.acknowledge()  # watched afresh while the robot holds
         self.hold_safely(robot)
         if self.holding:
             return self._held_after_slip()
-        self.feedback_message = f"{self.slipped.detail}; {self._held} (holding)"
+        self.feedback_message = f"{self._slip_line()} (holding)"
         return Status.RUNNING
+
+    def _slip_line(self) -> str:
+        """The slip's detail, the phase it came in and what the hold did."""
+        return f"{self.slipped.detail} in the '{self._slipped_in}' phase; {self._held}"
 
     def _held_after_slip(self) -> Status:
         """Fail with the slip's verdict, its detail and what the hold did."""
-        return self.fail(self.slipped.mode, f"{self.slipped.detail}; {self._held}")
+        return self.fail(self.slipped.mode, self._slip_line())
 
     # --- the guard's interface (behaviours.guard.GuardedMotion) ---------------------------------
 

@@ -152,18 +152,34 @@ def test_a_foot_that_carries_too_little_is_measured_afresh() -> None:
 
 def test_a_foot_rolled_onto_its_edge_is_no_slip() -> None:
     """Pushed sideways on the normal floor the robot tips over its left sole's outer edge: the
-    sole's middle swings past a 2 mm slide limit while its edge stays where it stood; the
-    verdict is the fall, not a slip."""
+    sole's middle swings past a 2 mm slide limit while its edge stays where it stood (the edge's
+    middle, from the sole box and the foot's pose); the verdict is the fall, not a slip."""
     world = build(load(SCENARIOS / "fall_steps.yaml"))
+    model, data, left = world.model, world.data, _foot(world, "left")
+    sole = model.geom("left_sole").id
+    edge = model.geom_pos[sole] + model.geom_size[sole] * np.array([0.0, 1.0, -1.0])  # outer, bottom
+
+    def edge_xy() -> np.ndarray:
+        return (data.xpos[left] + data.xmat[left].reshape(3, 3) @ edge)[:2]
+
+    start = edge_xy()
     detector, _ = _push(world, (0.0, 400.0, 0.0), DetectorThresholds(foot_slip=0.002))
-    failure = detector.failure
+    failure, now = detector.failure, detector.foot_slip_now("left")
     assert failure is not None, "the push did not topple the robot"
+    middle = detector.largest_slip[0].distance
+    moved = float(np.hypot(*(edge_xy() - start)))
+    print(failure.detail)
     print(
-        failure.detail,
-        f"; largest slide of a sole's middle {detector.largest_slip[0].distance * 1000:.1f} mm",
+        f"the sole's middle slid {middle * 1000:.1f} mm, its edge {moved * 1000:.2f} mm, its contacts "
+        f"{now.distance * 1000 if now else math.nan:.2f} mm"
     )
     assert failure.mode == "fall" and detector.slipped is None
-    assert detector.largest_slip[0].distance > 0.002  # the middle moved past the limit
+    assert middle > 0.002 and moved < 0.001  # the middle moved past the limit, the edge did not
+    assert (
+        now is not None
+        and now.distance == pytest.approx(moved, abs=0.001)
+        and now.load > detector.foot_slip_load
+    )
 
 
 def _walk(

@@ -91,7 +91,8 @@ class FootSlipCheck:
     Reads the contact geom pairs the contact check found at its last check
     (``ContactCheck.pairs``: run it first). ``slide`` (m), ``turn_deg`` and ``load`` (a share of
     the robot's weight): the limits in force; :attr:`largest`: the largest slide and turn of a
-    standing foot's middle seen so far; ``slipped``: the last slip (None before one).
+    standing foot's middle seen so far; :meth:`measure`: a standing foot's slip from its contacts
+    now; ``slipped``: the last slip (None before one).
 
     Raises:
         DetectorError: a limit in ``thresholds`` that is not a positive number.
@@ -117,10 +118,9 @@ class FootSlipCheck:
         self._weight = world.robot_mass * float(np.linalg.norm(m.opt.gravity))
         self._slide_sq = self.slide**2
         self._cos_turn_sq = math.cos(math.radians(self.turn_deg)) ** 2
-        # Cached flat views into MjData: each foot's rotation rows x and y, its position's x and y.
-        self._xmat, self._xpos = d.xmat.reshape(-1), d.xpos.reshape(-1)
-        self._rot_at = np.array([9 * b + j for b in self._bodies for j in range(6)], dtype=np.intp)
-        self._pos_at = np.array([3 * b + j for b in self._bodies for j in range(2)], dtype=np.intp)
+        # Cached flat views into MjData (its buffers never move): a foot's rotation rows x and y
+        # are xmat[9 b : 9 b + 6], its position's x and y xpos[3 b : 3 b + 2].
+        self._xmat, self._xpos = memoryview(d.xmat.reshape(-1)), memoryview(d.xpos.reshape(-1))
         # geom -> foot index for the soles (-1 elsewhere); the ground: the floor (or the world's geoms)
         self._foot_of = np.full(m.ngeom, -1, dtype=np.intp)
         for k, s in enumerate(self.sides):
@@ -128,6 +128,7 @@ class FootSlipCheck:
         ground = [ids.floor_geom] if ids.floor_geom >= 0 else np.flatnonzero(m.geom_bodyid == 0).tolist()
         self._ground = np.zeros(m.ngeom, dtype=bool)
         self._ground[ground] = True
+        self._ground_of, self._foot_list = self._ground.tolist(), self._foot_of.tolist()
         n = len(self.sides)
         self._support = [True] * n
         self._touching = [False] * n
@@ -136,6 +137,8 @@ class FootSlipCheck:
         # where it headed (unit, in the floor's plane) when it started standing, and when
         self._standing: list[list[Any]] = [[False, 0.0, 0.0, 1.0, 0.0, 0.0] for _ in range(n)]
         self._pose = [(np.zeros(3), np.eye(3)) for _ in range(n)]  # its body's pose then
+        # the feet to follow: (foot, its _standing, its xmat and xpos offsets, its sole's middle)
+        self._watched: list[tuple[Any, ...]] = []
         self._largest: tuple[float, int, float] = (0.0, -1, 0.0)  # slide squared, foot, time
         self._turned: tuple[float, int, float] = (1.0, -1, 0.0)  # the turn's signed cos squared, foot, time
         self.slipped: FootSlip | None = None
@@ -144,6 +147,18 @@ class FootSlipCheck:
         """Watch the phase's support feet (every foot when it names none)."""
         support = phase.support
         self._support = [support is None or s in support for s in self.sides]
+        self._watch()
+
+    def _watch(self) -> None:
+        """The feet to follow (touching the ground and support feet); the others stop standing."""
+        watched = []
+        for k, standing in enumerate(self._standing):
+            if self._touching[k] and self._support[k]:
+                body = self._bodies[k]
+                watched.append((k, standing, 9 * body, 3 * body, *self._sole[k]))
+            else:
+                standing[0] = False
+        self._watched = watched
 
     def check(self, t: float) -> Failure | None:
         """A ``slip`` failure naming the foot, how far, how much it turned and how fast, or None."""
@@ -151,30 +166,30 @@ class FootSlipCheck:
         if pairs != self._pairs:
             self._touching = self._touch(pairs)
             self._pairs = pairs
-        rot, pos = self._xmat.take(self._rot_at).tolist(), self._xpos.take(self._pos_at).tolist()
+            self._watch()
+        watched = self._watched
+        if not watched:
+            return None
+        xmat, xpos = self._xmat, self._xpos
         found = None
-        watched = self._support
-        for k, standing in enumerate(self._standing):
-            if not (self._touching[k] and watched[k]):
-                standing[0] = False
-                continue
-            r0, r1, r2, r3, r4, r5 = rot[6 * k : 6 * k + 6]
-            o0, o1, o2 = self._sole[k]
-            x = pos[2 * k] + r0 * o0 + r1 * o1 + r2 * o2  # the sole's middle, xy
-            y = pos[2 * k + 1] + r3 * o0 + r4 * o1 + r5 * o2
+        for k, standing, i, j, o0, o1, o2 in watched:
+            r0, r1, r2, r3, r4, r5 = xmat[i : i + 6].tolist()
+            p0, p1 = xpos[j : j + 2].tolist()
+            x = p0 + r0 * o0 + r1 * o1 + r2 * o2  # the sole's middle, xy
+            y = p1 + r3 * o0 + r4 * o1 + r5 * o2
             if not standing[0]:  # starts standing: measured from here
                 self._stand(k, x, y, r0, r3, t)
                 continue
-            _, ax, ay, hx, hy, _ = standing
-            slide_sq = (x - ax) ** 2 + (y - ay) ** 2
-            dot = r0 * hx + r3 * hy  # the heading now (x axis in the floor's plane) on the start's
-            cos_sq = dot * abs(dot) / (r0 * r0 + r3 * r3)  # the turn's cosine squared, its sign kept
+            dx, dy = x - standing[1], y - standing[2]
+            slide_sq = dx * dx + dy * dy
+            dot = r0 * standing[3] + r3 * standing[4]  # the heading now (x axis on the floor) on the start's
+            dot_sq, size = dot * dot, r0 * r0 + r3 * r3  # the turn's cosine squared: dot_sq / size
             if slide_sq > self._largest[0]:
                 self._largest = (slide_sq, k, t)
-            if cos_sq < self._turned[0]:
-                self._turned = (cos_sq, k, t)
-            if (slide_sq > self._slide_sq or cos_sq < self._cos_turn_sq) and found is None:
-                found = self._confirm(t, k, x, y, r0, r3)
+            if dot_sq < self._turned[0] * size or dot < 0.0:
+                self._turned = (math.copysign(dot_sq / size, dot), k, t)
+            if slide_sq > self._slide_sq or dot_sq < self._cos_turn_sq * size or dot < 0.0:
+                found = found or self._confirm(t, k, x, y, r0, r3)
         return found
 
     @property
@@ -198,8 +213,12 @@ class FootSlipCheck:
     def _touch(self, pairs: bytes) -> list[bool]:
         """Which feet's soles touch the ground among the contacts' geom pairs (``pairs``: their bytes)."""
         touching = [False] * len(self.sides)
-        for k in set(self._feet_of(np.frombuffer(pairs, dtype=np.int32).reshape(-1, 2)).tolist()) - {-1}:
-            touching[k] = True
+        ground, foot_of = self._ground_of, self._foot_list
+        flat = np.frombuffer(pairs, dtype=np.int32).tolist()
+        for a, b in zip(flat[::2], flat[1::2], strict=True):  # a few contacts: plain Python is quicker
+            k = foot_of[a] if ground[b] else foot_of[b] if ground[a] else -1
+            if k >= 0:
+                touching[k] = True
         return touching
 
     def _feet_of(self, geom: NDArray[np.int32]) -> NDArray[np.intp]:
@@ -207,41 +226,55 @@ class FootSlipCheck:
         a, b = geom[:, 0], geom[:, 1]
         return np.where(self._ground[b], self._foot_of[a], np.where(self._ground[a], self._foot_of[b], -1))
 
-    def _confirm(self, t: float, k: int, x: float, y: float, hx: float, hy: float) -> Failure | None:
-        """Foot ``k``'s middle slid or turned past a limit: a slip when its points on the floor did
-        too while it carries ``load``; a foot that carries less is measured afresh from here."""
+    def measure(self, side: str, t: float) -> FootSlip | None:
+        """The ``side`` foot's slip so far, from its contacts now: how far its points on the floor
+        slid and how much it turned since it started standing, how fast they slide and the share
+        of the weight it carries, at time ``t``; None while it does not stand."""
+        k = self.sides.index(side)
+        ok, _, _, h0x, h0y, since = self._standing[k]
+        if not ok:
+            return None
         m, d = self._m, self._d
         contacts = np.flatnonzero(self._feet_of(d.contact.geom) == k)
         force, wrench = 0.0, np.zeros(6)
         for i in contacts.tolist():
             mujoco.mj_contactForce(m, d, i, wrench)
             force += float(wrench[0])
-        load = force / self._weight
-        if load < self.load or not len(contacts):
-            self._stand(k, x, y, hx, hy, t)
-            return None
         body = self._bodies[k]
-        points = d.contact.pos[contacts]  # where the sole touches the floor now (world)
         now, rot = d.xpos[body], d.xmat[body].reshape(3, 3)
+        hx, hy = float(rot[0, 0]), float(rot[1, 0])
+        turn = abs(math.atan2(h0x * hy - h0y * hx, h0x * hx + h0y * hy))
+        if not len(contacts):
+            return FootSlip(side, 0.0, turn, 0.0, t, 0.0, since)
+        points = d.contact.pos[contacts]  # where the sole touches the floor now (world)
         then, rot0 = self._pose[k]
         before = then + ((points - now) @ rot) @ rot0.T  # the same points of the sole, when it stood
         distance = float(np.max(np.hypot(*(points - before)[:, :2].T)))
-        _, _, _, h0x, h0y, since = self._standing[k]
-        turn = abs(math.atan2(h0x * hy - h0y * hx, h0x * hx + h0y * hy))
-        if distance <= self.slide and turn <= math.radians(self.turn_deg):
-            return None  # rolled onto an edge, or turned within its limit: no slip
         velocity = np.zeros(6)  # (angular, linear) at the body's origin, world frame
         mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, body, velocity, 0)
         arm = points.mean(axis=0) - now
         speed = float(np.hypot(*(velocity[3:5] + np.cross(velocity[:3], arm)[:2])))
-        slip = self.slipped = FootSlip(self.sides[k], distance, turn, speed, t, load, since)
+        return FootSlip(side, distance, turn, speed, t, force / self._weight, since)
+
+    def _confirm(self, t: float, k: int, x: float, y: float, hx: float, hy: float) -> Failure | None:
+        """Foot ``k``'s middle slid or turned past a limit (it is at ``x``, ``y``, heading ``hx``,
+        ``hy``): a slip when its points on the floor did too while it carries ``load``; a foot
+        that carries less is measured afresh from here."""
+        slip = self.measure(self.sides[k], t)
+        assert slip is not None  # foot k stands
+        if slip.load < self.load:
+            self._stand(k, x, y, hx, hy, t)
+            return None
+        if slip.distance <= self.slide and slip.turn <= math.radians(self.turn_deg):
+            return None  # rolled onto an edge, or turned within its limit: no slip
+        self.slipped = slip
         self._standing[k][0] = False  # measured afresh from where it stands now
-        name = str(m.body(body).name)
+        name = str(self._m.body(self._bodies[k]).name)
         detail = (
-            f"slip: the {slip.side} foot ({name}) slid {distance * 1000:.0f} mm along the floor (limit "
-            f"{self.slide * 1000:.0f} mm) and turned {math.degrees(turn):.1f} deg (limit {self.turn_deg:.1f} "
-            f"deg) since it stood at t={since:.3f} s, sliding at {speed * 1000:.0f} mm/s under "
-            f"{load * 100:.0f} % of the weight, at t={t:.3f} s"
+            f"slip: the {slip.side} foot ({name}) slid {slip.distance * 1000:.0f} mm along the floor (limit "
+            f"{self.slide * 1000:.0f} mm) and turned {math.degrees(slip.turn):.1f} deg (limit "
+            f"{self.turn_deg:.1f} deg) since it stood at t={slip.since:.3f} s, sliding at "
+            f"{slip.speed * 1000:.0f} mm/s under {slip.load * 100:.0f} % of the weight, at t={t:.3f} s"
         )
         return Failure("slip", detail, t, (name,))
 

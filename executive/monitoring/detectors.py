@@ -49,8 +49,8 @@ class FailureDetector:
     counters are taken at construction (and the start pelvis height, ``start_height``, for
     the report); the fall limits are the robot's safe posture's unless ``thresholds`` sets them
     (``standing_height``, ``pelvis_drop`` and ``trunk_tilt_deg`` are those in force); the foot
-    slip limits are the robot's sole's unless it sets them (``foot_slip`` and
-    ``foot_slip_yaw_deg`` are those in force).
+    slip limits are the robot's sole's unless it sets them (``foot_slip``, ``foot_slip_yaw_deg``
+    and ``foot_slip_load`` are those in force).
     ``distance_stride``: compute the closest clearance every this many checks (0: never).
     """
 
@@ -75,8 +75,10 @@ class FailureDetector:
         self.standing_height = fall.standing_height
         #: m below standing and deg from vertical beyond which the robot has fallen.
         self.pelvis_drop, self.trunk_tilt_deg = fall.pelvis_drop, fall.trunk_tilt_deg
-        #: m a standing foot's sole may slide and deg it may turn before it has slipped.
+        #: m a standing foot's sole may slide and deg it may turn before it has slipped, and the
+        #: share of the robot's weight it carries for that to count.
         self.foot_slip, self.foot_slip_yaw_deg = self._slip.slide, self._slip.turn_deg
+        self.foot_slip_load = self._slip.load
         self._feet = frozenset(self._slip.sides)
         self._sides = frozenset(ids.hand_bodies)
         self._objects = frozenset(ids.object_geoms)
@@ -170,6 +172,18 @@ class FailureDetector:
         """The largest slide (m) and the largest turn (rad) of a standing foot seen so far, each
         with its foot and time: how near the feet came to a slip."""
         return self._slip.largest
+
+    def foot_slip_now(self, side: str) -> FootSlip | None:
+        """The ``side`` foot's slip so far, from its contacts now (how far its points on the
+        floor slid, how much it turned, how fast, under what share of the weight), or None while
+        it does not stand (lifted, or not a support foot of the phase).
+
+        Raises:
+            DetectorError: the robot has no ``side`` foot.
+        """
+        if side not in self._feet:
+            raise DetectorError(f"no foot '{side}'; the robot has: {', '.join(sorted(self._feet))}")
+        return self._slip.measure(side, float(self._d.time))
 
     @property
     def slipped(self) -> FootSlip | None:
