@@ -72,12 +72,12 @@ class DetectorThresholds:
     place_tilt_deg: float = 10.0
     # m; clearances larger than this are not computed (broad phase of the closest call).
     clearance_horizon: float = 0.20
-    # m the part of a standing foot's sole on the floor may slide along it => slip. None: a
-    # quarter of the sole's half width (its middle's distance to its nearest edge; humanoid
-    # 19 mm, G1 8 mm): the room over the sole a slide takes from the CoM (SLIDE_FRACTION).
+    # m the part of a standing foot's sole on the floor may slide along it => slip. None: 0.4
+    # of the sole's half width (its middle's distance to its nearest edge; humanoid 30 mm, G1
+    # 14 mm): the room the step planner keeps the CoM inside the stance sole (SLIDE_FRACTION).
     foot_slip: float | None = None
     # deg a standing foot may turn about the vertical => slip. None: the turn that moves the
-    # sole's toe by foot_slip (humanoid 8.3 deg, G1 5.2 deg).
+    # sole's toe by foot_slip (humanoid 13.2 deg, G1 8.9 deg).
     foot_slip_yaw_deg: float | None = None
     # share of the robot's weight a foot must carry for its slide to count: a foot that only
     # skims the floor (a swing foot set down, a weight shifted off it) takes no support away.

@@ -34,9 +34,10 @@ from executive.world.model import World
 __all__ = ["SLIDE_FRACTION", "FootSlip", "FootSlipCheck", "sole_frame"]
 
 #: The default slide limit as a share of the sole's half width (its middle's distance to its
-#: nearest edge): a stance foot that slid that far has taken that share of the CoM's room over
-#: the sole away (the planner keeps at most 0.4 of it, ``StepConfig.single_support_fraction``).
-SLIDE_FRACTION = 0.25
+#: nearest edge): the share the step planner keeps the CoM inside the stance sole
+#: (``StepConfig.single_support_fraction``): a stance foot that slid further has taken all of that
+#: room from under the CoM.
+SLIDE_FRACTION = 0.4
 
 
 @dataclass(frozen=True)
