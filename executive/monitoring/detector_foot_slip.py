@@ -206,7 +206,7 @@ class FootSlipCheck:
 
     def _stand(self, k: int, x: float, y: float, hx: float, hy: float, t: float) -> None:
         """Foot ``k`` starts standing: its sole's middle at ``x``, ``y``, heading ``hx``, ``hy``."""
-        size = math.hypot(hx, hy)
+        size = max(math.hypot(hx, hy), 1e-9)  # the x axis's share in the floor's plane
         self._standing[k][:] = [True, x, y, hx / size, hy / size, t]
         body = self._bodies[k]
         self._pose[k] = (self._d.xpos[body].copy(), self._d.xmat[body].reshape(3, 3).copy())
