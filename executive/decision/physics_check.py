@@ -151,14 +151,16 @@ def run_job(job: RolloutJob) -> dict[str, Any]:
     """Execute ``job`` in physics; its record: alternative, seed, outcome, failure, wall time.
 
     ``outcome`` is ``success``, a failure detector's mode, ``timeout``, or ``error`` (the code
-    raised: a defect, counted, never hidden).
+    raised: a defect, counted, never hidden). What follows a walk inside the plan is re-planned
+    from the stance the robot measures (its odometry seeded by the rollout's truth), with no risk
+    check: nothing is approved yet.
     """
     from executive.execution.runner import error_fields, execute_plan, outcome_fields
 
     t0 = time.perf_counter()
     record: dict[str, Any] = {"alternative": job.plan.name, "seed": job.seed, "failure": None}
     try:
-        result = execute_plan(job.plan, _truth(job), job.plan.task)
+        result = execute_plan(job.plan, _truth(job), job.plan.task, seed=job.seed)
         record.update(outcome_fields(result))
     except Exception as exc:
         record.update(error_fields(exc))

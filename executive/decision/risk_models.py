@@ -5,7 +5,7 @@ a function of the planned alternative (:class:`PlanContext`) that returns the mo
 :class:`executive.risk.report.RiskReport`. The built-in models (collision, fall, drop, tracking) are
 registered by :mod:`executive.decision.assessment`; a new mode registers its own::
 
-    register_model("slip", lambda ctx: RiskReport("slip", p, (p, p), ctx.severity("slip"), p))
+    register_model("spill", lambda ctx: RiskReport("spill", p, (p, p), ctx.severity("spill"), p))
 
 A model whose prediction a dry run can measure (the plan executed once on the estimate, before
 any rollout; :mod:`executive.decision.physics_check`) registers how the run's record refines its

@@ -65,8 +65,10 @@ class HandFrames:
         else:
             shift = np.array(stance[:2], dtype=float) - start[:2]
             self._moved = _Walked(start, stance[2] - start_heading, shift)
-        self.home = {
-            side: self._moved.target(HandTarget(side, data.site_xpos[site].copy(), site_quat(data, site)))
+        self.home = {  # poses of the body: they move with the base (frame "base")
+            side: self._moved.target(
+                HandTarget(side, data.site_xpos[site].copy(), site_quat(data, site), frame="base")
+            )
             for side, site in world.ids.hand_sites.items()
         }
         self.base = self._moved.point(start)
@@ -140,7 +142,7 @@ class _Walked:
             return t
         quat = np.zeros(4)
         mujoco.mju_mulQuat(quat, self.quat, np.asarray(t.quat, dtype=float))
-        return HandTarget(t.side, self.point(t.position), quat)
+        return HandTarget(t.side, self.point(t.position), quat, t.frame)
 
 
 def _walked(world: World, start: FloatArray, start_heading: float) -> _Walked:

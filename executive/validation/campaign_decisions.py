@@ -143,7 +143,7 @@ def decide_trial(
         elif plan is None:
             record["failure"] = {"mode": "infeasible", "detail": error}
         else:
-            execute_trial(record, plan, estimate, perturbation, task_index)
+            execute_trial(record, plan, estimate, perturbation, task_index, (predicted or {}).get("value"))
         records.append(record)
     return records
 

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from executive.planning.restance import LocalReplanner
 from executive.schema.types import Scenario, SceneVariation
 from executive.validation.campaign_predictions import Prediction, predict
 from executive.world.model import Perturbation
@@ -103,7 +104,9 @@ def run_trial(
     ``fall``, ``drop``, ``unstable``, or a verdict no mode predicts (``tracking``, ``task``,
     ``timeout``: not finished in the time limit; :mod:`executive.schema.failure_modes`);
     ``infeasible`` when the alternative does not plan (nothing is executed) and ``error`` when
-    the trial's code raised (a defect; counted, never hidden).
+    the trial's code raised (a defect; counted, never hidden). What follows a walk inside the
+    plan is re-planned from the stance the robot measures (its odometry seeded by the trial),
+    its risk checked as a mission would (:func:`_replanner`); the record's ``restance`` says how.
 
     ``prediction``: the alternative planned on the scenario's fixed estimate, once per
     alternative (planning is deterministic: planning again per trial gives the same plan);
@@ -116,7 +119,7 @@ def run_trial(
     if not prediction.feasible:
         record["failure"] = {"mode": "infeasible", "detail": prediction.error}
         return record
-    return execute_trial(record, prediction.plan, estimate, perturbation, task_index)
+    return execute_trial(record, prediction.plan, estimate, perturbation, task_index, prediction.value)
 
 
 def trial_record(
@@ -150,7 +153,12 @@ def trial_record(
 
 
 def execute_trial(
-    record: dict[str, Any], plan: Any, estimate: Scenario, perturbation: Perturbation, task_index: int
+    record: dict[str, Any],
+    plan: Any,
+    estimate: Scenario,
+    perturbation: Perturbation,
+    task_index: int,
+    value: float | None = None,
 ) -> dict[str, Any]:
     """``record`` with the outcome of ``plan`` executed in physics on the truth of ``perturbation``.
 
@@ -163,18 +171,36 @@ def execute_trial(
         estimate: the trial's estimate (the truth is built from it and ``perturbation``).
         perturbation: the truth's perturbation.
         task_index: the task of ``estimate``'s mission the plan does.
+        value: the alternative's predicted value, the bound a re-plan after a walk is checked
+            against (:func:`_replanner`); None: not checked.
     """
     from executive.execution.runner import error_fields, execute_plan, outcome_fields
     from executive.world.model import build
 
     try:
         truth = build(estimate, perturbation, kind="truth")
-        result = execute_plan(plan, truth, estimate.mission[task_index])
+        replanner = _replanner(estimate, value)
+        result = execute_plan(
+            plan, truth, estimate.mission[task_index], replanner=replanner, seed=record["seed"]
+        )
     except Exception as exc:  # a defect in a trial must not end the campaign; it is counted
         record.update(error_fields(exc))
         return record
     record.update(outcome_fields(result))
     return record
+
+
+def _replanner(estimate: Scenario, value: float | None) -> LocalReplanner:
+    """What follows a walk inside the plan is re-planned from the measured stance on the trial's
+    estimate, its risk checked as a mission checks it: against the prediction's value, approved
+    (forced) at that value or the threshold if higher."""
+    from executive.decision.restance import Approval, RiskRecheck
+
+    risk = estimate.risk
+    if value is None:
+        return LocalReplanner(estimate)
+    approval = Approval.of(value, risk.threshold, risk.ordering)
+    return LocalReplanner(estimate, check=RiskRecheck(approval))
 
 
 def _predicted(prediction: Prediction) -> dict[str, Any] | None:

@@ -204,17 +204,26 @@ class World:
         model.body_ipos[torso, :2] -= (dx * scale, dy * scale)  # undoes _shift_torso_com
         return model
 
-    @property
-    def base_qpos(self) -> slice:
-        """The robot's floating base in ``qpos`` (position, then quaternion w x y z)."""
+    def _base_joint(self) -> int:
+        """The robot's floating base joint."""
         model = self.model
-        joint = next(
+        return next(
             j
             for j in range(model.njnt)
             if model.jnt_bodyid[j] == self.ids.base_body and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE
         )
-        adr = int(model.jnt_qposadr[joint])
+
+    @property
+    def base_qpos(self) -> slice:
+        """The robot's floating base in ``qpos`` (position, then quaternion w x y z)."""
+        adr = int(self.model.jnt_qposadr[self._base_joint()])
         return slice(adr, adr + 7)
+
+    @property
+    def base_qvel(self) -> slice:
+        """The robot's floating base in ``qvel`` (linear velocity in the world frame, then angular)."""
+        adr = int(self.model.jnt_dofadr[self._base_joint()])
+        return slice(adr, adr + 6)
 
     @property
     def robot_dof(self) -> int:

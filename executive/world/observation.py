@@ -51,6 +51,7 @@ __all__ = [
     "follow_base_of",
     "holders",
     "look",
+    "measure_base",
     "measured_qpos",
     "refresh",
     "update_estimate",
@@ -347,16 +348,29 @@ def refresh(
     return fields
 
 
-def follow_base_of(world: World, robot: Any) -> dict[str, Any]:
-    """Put the estimate's robot base where ``robot`` measures it (its ``observe_base()``, odometry
-    with the scenario's ``uncertainty.base_position``/``base_yaw``; else its ``data.qpos``): the
-    log's record of it (position, yaw)."""
+def measure_base(world: World, robot: Any) -> Pose:
+    """Where ``robot`` measures its base: its ``observe_base()`` (the simulated robot's odometry,
+    with the scenario's ``uncertainty.base_position``/``base_yaw``), else its ``data.qpos``.
+
+    Args:
+        world: a world of the robot's model (its base's place in ``qpos``).
+        robot: the robot.
+
+    Returns:
+        The base's position (m) and orientation (w x y z).
+    """
     measure = getattr(robot, "observe_base", None)
     if callable(measure):
         pos, quat = measure()
-    else:
-        q = np.asarray(robot.data.qpos, dtype=float)[world.base_qpos]
-        pos, quat = q[:3], q[3:]
+        return np.asarray(pos, dtype=float), np.asarray(quat, dtype=float)
+    q = np.array(robot.data.qpos, dtype=float)[world.base_qpos]
+    return q[:3], q[3:]
+
+
+def follow_base_of(world: World, robot: Any) -> dict[str, Any]:
+    """Put the estimate's robot base where ``robot`` measures it (:func:`measure_base`): the log's
+    record of it (position, yaw)."""
+    pos, quat = measure_base(world, robot)
     world.data.qpos[world.base_qpos] = np.concatenate([pos, np.asarray(quat) / np.linalg.norm(quat)])
     world.follows_base = True
     mujoco.mj_kinematics(world.model, world.data)
