@@ -9,9 +9,11 @@ plane), misplaced beyond the detector's tolerance.
 
 :func:`misplace_probability` gives P(|l| > the grasp's lateral tolerance, or misplaced): the
 grasp's lateral failure and the misplacement are one event of ``l`` and ``h``, integrated over
-``l`` (Gauss-Legendre inside the lateral tolerance) with ``h``'s part a non-central chi-square
-tail of 2 degrees of freedom (the Rice distribution; Johnson, Kotz & Balakrishnan, 1995,
-ch. 29). Without execution error it is the closed form of :mod:`executive.risk.pinch`.
+``l`` (composite Gauss-Legendre inside the lateral tolerance, broken where ``|l a + c|`` crosses
+the tolerance) with ``h``'s part a non-central chi-square tail of 2 degrees of freedom (the Rice
+distribution; Johnson, Kotz & Balakrishnan, 1995, ch. 29); without spread the event is an
+interval of ``l`` (normal tails, exact), and without any execution error the closed form of
+:mod:`executive.risk.pinch`.
 
 Usage::
 
@@ -21,13 +23,14 @@ Usage::
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from executive.risk.gaussian import exceed_probability
+from executive.risk.gaussian import exceed_probability, normal_cdf
 from executive.risk.pinch import placement_tolerance
 
 __all__ = [
@@ -97,20 +100,74 @@ def misplace_probability(
     if lateral_sigma == 0.0:
         if abs(lateral_mean) > lateral_tolerance:
             return 1.0
-        return float(_misplaced(lateral_mean * axis + centre, spread.sigma, tolerance))
+        return float(_misplaced(lateral_mean * axis + centre, spread.sigma, tolerance)[0])
     grasp = float(exceed_probability(lateral_tolerance, lateral_sigma, lateral_mean))
     low = max(-lateral_tolerance, lateral_mean - 9.0 * lateral_sigma)
     high = min(lateral_tolerance, lateral_mean + 9.0 * lateral_sigma)
     if high <= low:
         return min(1.0, grasp)
-    x, w = np.polynomial.legendre.leggauss(order)
-    ell = 0.5 * (high - low) * x + 0.5 * (high + low)
-    density = np.exp(-0.5 * ((ell - lateral_mean) / lateral_sigma) ** 2) / (
-        lateral_sigma * np.sqrt(2.0 * np.pi)
+    roots = _crossings(axis, centre, tolerance)
+    if spread.sigma == 0.0:  # misplaced iff l is outside the crossings: normal tails, exact
+        inside = 0.0
+        if roots is not None:
+            a, b = max(low, roots[0]), min(high, roots[1])
+            if b > a:
+                inside = float(
+                    normal_cdf((b - lateral_mean) / lateral_sigma)
+                    - normal_cdf((a - lateral_mean) / lateral_sigma)
+                )
+        kept = float(
+            normal_cdf((high - lateral_mean) / lateral_sigma)
+            - normal_cdf((low - lateral_mean) / lateral_sigma)
+        )
+        return float(np.clip(grasp + kept - inside, 0.0, 1.0))
+    return float(
+        np.clip(
+            grasp
+            + _inside(
+                lateral_mean, lateral_sigma, low, high, axis, centre, spread.sigma, tolerance, roots, order
+            ),
+            0.0,
+            1.0,
+        )
     )
-    placed = _misplaced(ell[:, None] * axis[None, :] + centre[None, :], spread.sigma, tolerance)
-    inside = 0.5 * (high - low) * float(w @ (density * placed))
-    return float(np.clip(grasp + inside, 0.0, 1.0))
+
+
+def _crossings(axis: FloatArray, centre: FloatArray, tolerance: float) -> tuple[float, float] | None:
+    """The l where |l axis + centre| = tolerance (``axis`` a unit vector), or None: never within."""
+    along = float(axis @ centre)
+    gap = along * along - float(centre @ centre) + tolerance * tolerance
+    if gap < 0.0:
+        return None
+    return -along - float(np.sqrt(gap)), -along + float(np.sqrt(gap))
+
+
+def _inside(
+    mean: float,
+    sigma: float,
+    low: float,
+    high: float,
+    axis: FloatArray,
+    centre: FloatArray,
+    spread: float,
+    tolerance: float,
+    roots: tuple[float, float] | None,
+    order: int,
+) -> float:
+    """The integral over l in [low, high] of its density times P(misplaced | l): composite
+    Gauss-Legendre, with breaks about the crossings, where the Rice tail turns from 0 to 1."""
+    cuts = {low, high}
+    for root in roots or ():
+        cuts |= {root - 6.0 * spread, root, root + 6.0 * spread}
+    edges = sorted(c for c in cuts if low <= c <= high)
+    x, w = np.polynomial.legendre.leggauss(max(8, order // 2))
+    total = 0.0
+    for a, b in itertools.pairwise(edges):
+        ell = 0.5 * (b - a) * x + 0.5 * (b + a)
+        density = np.exp(-0.5 * ((ell - mean) / sigma) ** 2) / (sigma * np.sqrt(2.0 * np.pi))
+        placed = _misplaced(ell[:, None] * axis[None, :] + centre[None, :], spread, tolerance)
+        total += 0.5 * (b - a) * float(w @ (density * placed))
+    return total
 
 
 def _misplaced(centre: FloatArray, sigma: float, tolerance: float) -> FloatArray:

@@ -7,8 +7,9 @@ predicts where each hand ends:
 
 * the servos' static error at the move's end knot (:class:`executive.risk.servo.ServoSet`): a
   joint target clipped at its servo's range, a carried object's weight (per kilogram, so that
-  the truth's mass scales it), the whole body held on its two feet; a servo that cannot give the
-  torque holding the pose stalls (the move fails);
+  the truth's mass scales it; a place ends with the object on its support, its weight off the
+  hand), the whole body held on its two feet; a servo that cannot give the torque holding the
+  pose stalls (the move fails);
 * what the statics do not see (the floating base sliding or lagging while the robot balances,
   the settling of a move that has just ended): before a physics run, a spread of
   :data:`UNMODELLED_SIGMA` per axis; after the decision's dry run (the plan executed on the
@@ -232,22 +233,24 @@ def _move_end(
     """One move's end: the hold of its last knot, each hand's error, the masses its servos hold."""
     model = world.model
     q = traj.qpos[-1]
-    load = _object_load(world, q, carried) if carried else np.zeros((0, model.nv))
+    # A place ends with the object resting on its support: the hand holds none of its weight.
+    held = carried if step.kind != "place" else None
+    load = _object_load(world, q, held) if held else np.zeros((0, model.nv))
     hold = servos.hold(model, q, load)
     data = mujoco.MjData(model)
     data.qpos[:] = q
     mujoco.mj_kinematics(model, data)
     mujoco.mj_comPos(model, data)
-    scale = np.array([mass]) if carried else np.zeros(0)
+    scale = np.array([mass]) if held else np.zeros(0)
     dq = hold.total(servos.dofs, scale)
     hands = []
     for side in traj.hand_paths:
         jac = np.zeros((3, model.nv))
         mujoco.mj_jacSite(model, data, jac, None, world.ids.hand_sites[side])
-        per_kg = jac @ hold.deflection[1] if carried else np.zeros(3)
+        per_kg = jac @ hold.deflection[1] if held else np.zeros(3)
         hands.append(HandEnd(side, jac @ dq, per_kg, np.zeros(3)))
     peak = _peak_ratio(world, servos, traj, carried, mass)
-    return MoveEnd(step.name, MOVE_TOLERANCE, tuple(hands), _mass_range(hold, bool(carried)), peak)
+    return MoveEnd(step.name, MOVE_TOLERANCE, tuple(hands), _mass_range(hold, bool(held)), peak)
 
 
 def _object_load(world: World, qpos: FloatArray, carried: tuple[str, str]) -> FloatArray:
