@@ -74,7 +74,8 @@ class ServoSet:
         dofs: (S,) dof address of each servoed joint; qpos: (S,) its qpos address.
         stiffness: (S,) N m / rad (``kp gear^2``); limit: (S,) N m (inf: unlimited).
         low, high: (S,) the joint targets a servo can be given (its ctrl range over its gear).
-        bias: (S,) fed its links' ``qfrc_bias`` (arm, waist); legs: (S,) fed the static leg load.
+        bias: (S,) fed its links' ``qfrc_bias`` (arm, waist); legs: (S,) fed the static leg load;
+        arms: (S,) an arm's joint.
         base: the floating base's 6 dofs (empty for a fixed base); feet: the foot bodies.
     """
 
@@ -83,10 +84,11 @@ class ServoSet:
         grippers = {a for ids in world.ids.gripper_actuators.values() for a in ids}
         named = {name for names in world.profile.leg_joints.values() for name in names}
         legs = {int(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n)) for n in named}
-        upper = {j for ids in world.ids.arm_joints.values() for j in ids}
-        upper |= {
+        arms = {j for ids in world.ids.arm_joints.values() for j in ids}
+        waist = {
             int(mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n)) for n in world.profile.waist_joints
         }
+        upper = arms | waist
         rows = []
         for a in range(model.nu):
             if a in grippers or model.actuator_trntype[a] != mujoco.mjtTrn.mjTRN_JOINT:
@@ -102,13 +104,16 @@ class ServoSet:
             if model.actuator_ctrllimited[a]:
                 low, high = sorted(float(c) / gear for c in model.actuator_ctrlrange[a])
             dof, qadr = int(model.jnt_dofadr[joint]), int(model.jnt_qposadr[joint])
-            rows.append((dof, qadr, kp * gear * gear, force, low, high, joint in upper, joint in legs))
+            rows.append(
+                (dof, qadr, kp * gear * gear, force, low, high, joint in upper, joint in legs, joint in arms)
+            )
         cols = list(zip(*rows, strict=True))
         self.dofs = np.array(cols[0], dtype=int)
         self.qpos = np.array(cols[1], dtype=int)
         self.stiffness, self.limit = np.array(cols[2]), np.array(cols[3])
         self.low, self.high = np.array(cols[4]), np.array(cols[5])
         self.bias, self.legs = np.array(cols[6], dtype=bool), np.array(cols[7], dtype=bool)
+        self.arms = np.array(cols[8], dtype=bool)
         free = [
             j
             for j in range(model.njnt)
@@ -192,7 +197,9 @@ class ServoSet:
         base = contact[:, self.base]
         wrench = np.linalg.lstsq(base.T, gravity[self.base], rcond=None)[0]
         d, eps = self._scratch, 1e-6
-        free = np.concatenate([self.base, self.dofs])
+        # The base, legs and waist lean the body; an arm's deflection moves the weight on the legs
+        # by its own mass times a few centimetres: its columns are left out.
+        free = np.concatenate([self.base, self.dofs[~self.arms]])
         out = np.zeros((model.nv, model.nv))
         step = np.zeros(model.nv)
         at = gravity - contact.T @ wrench

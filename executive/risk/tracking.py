@@ -72,6 +72,8 @@ RESIDUAL_SCALE = 0.16
 #: model's, a press and a walk have behaviours of their own).
 _UNTRACKED = ("push", "press", "step", "grasp", "release")
 _GRAVITY = np.array([0.0, 0.0, -9.81])
+#: Every third knot's torques (the minimum-jerk timing's accelerations change smoothly between them).
+_KNOT_STRIDE = 3
 
 
 @dataclass(frozen=True)
@@ -306,7 +308,7 @@ def _peak_ratio(
     force = np.empty(model.nv)
     hand = int(model.body(world.profile.arms[carried[0]].hand_body).id) if carried else -1
     peak = 0.0
-    for k in range(0, len(traj.times), 2):
+    for k in range(0, len(traj.times), _KNOT_STRIDE):
         data.qpos[:], data.qvel[:], data.qacc[:] = traj.qpos[k], qvel[k], qacc[k]
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
