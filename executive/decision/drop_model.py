@@ -23,7 +23,7 @@ in place of the predicted one for the final placement.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import Any
 
 import mujoco
@@ -31,7 +31,7 @@ import numpy as np
 
 from executive.decision.risk_models import PlanContext
 from executive.monitoring.detectors import DetectorThresholds
-from executive.planning.plan import AlternativePlan
+from executive.planning.plan import AlternativePlan, Step
 from executive.planning.planner import Trajectory
 from executive.risk.grasp import (
     GraspTolerance,
@@ -69,27 +69,31 @@ _PLACEMENT_KEYS = (
 )
 
 
+@dataclass(frozen=True)
 class HandExecution:
-    """The grasping hand's predicted execution error (:class:`TrackingPrediction`): at the end of
-    the move onto the object and at the end of the place that sets it down."""
+    """The grasping hand's predicted execution error (:meth:`TrackingPrediction.hand_at`): at the
+    end of the move onto the object and at the end of the place that sets it down (zeros where
+    a move is not tracked), with the place step (None: the object is not set down)."""
 
-    def __init__(self, tracking: TrackingPrediction | None, plan: AlternativePlan, i: int) -> None:
+    approach: np.ndarray
+    approach_sigma: float
+    place: np.ndarray
+    place_sigma: float
+    place_step: Step | None
+
+    @classmethod
+    def of(cls, tracking: TrackingPrediction, plan: AlternativePlan, i: int) -> HandExecution:
+        """The hand of grasp step ``i``, as ``tracking`` predicts it."""
         step = plan.steps[i]
         moves = [s for s in plan.steps[:i] if s.side == step.side and s.name in plan.trajectories]
         place = next((s for s in plan.steps[i:] if s.kind == "place" and s.name in plan.trajectories), None)
-        self.place_step = place
-        at = tracking.hand_at(moves[-1].name, step.side) if tracking is not None and moves else None
-        self.approach, self.approach_sigma = at if at is not None else (np.zeros(3), 0.0)
-        there = (
-            tracking.hand_at(place.name, place.side) if tracking is not None and place is not None else None
-        )
-        self.place, self.place_sigma = there if there is not None else (np.zeros(3), 0.0)
-        self.known = tracking is not None
+        none = (np.zeros(3), 0.0)
+        at = (tracking.hand_at(moves[-1].name, step.side) if moves else None) or none
+        there = (tracking.hand_at(place.name, place.side) if place is not None else None) or none
+        return cls(at[0], at[1], there[0], there[1], place)
 
     def spread(self) -> ExecutionSpread:
-        """Where the place's hand error and the release put the object, in the table plane."""
-        if not self.known:
-            return ExecutionSpread(np.zeros(2), 0.0)
+        """Where the place's hand error and the set-down put the object, in the table plane."""
         return ExecutionSpread(
             np.asarray(self.place[:2], dtype=float), float(np.hypot(self.place_sigma, SET_DOWN_SIGMA))
         )
@@ -142,7 +146,7 @@ def _table_grasp(
     carries = [s for s in carries if s.name in plan.trajectories]
     if carries:
         world = _with_object_at(world, obj, plan.trajectories[carries[-1].name].qpos[-1])
-    execution = HandExecution(tracking, plan, i) if tracking is not None else None
+    execution = HandExecution.of(tracking, plan, i) if tracking is not None else None
     if carries and execution is not None:  # where the set-down left it: its error grows by one
         u = world.scenario.uncertainty
         u = replace(u, object_position=float(np.hypot(u.object_position, SET_DOWN_SIGMA)))
@@ -308,7 +312,7 @@ def _grasp(
     reference = np.array([hand_pos[0], hand_pos[1], obj_pos[2]])
     extra: dict[str, Any] = {}
     placement: dict[str, float] = {}
-    if execution is not None and execution.known:
+    if execution is not None:
         extra, placement = _executed(
             world, side, obj, (hand_pos, hand_rot), reference, rotation, own, shift, execution, place, places
         )
