@@ -208,3 +208,21 @@ def test_a_dry_run_s_measurement_replaces_the_statics() -> None:
     assert measured.moves[0].measured and np.allclose(moved.residual, [0.027, 0.0, 0.0])
     assert 0.2 < measured.probabilities()[0] < 0.5  # 2 mm inside, the residual's 16 % spread: 4.3 mm
     assert prediction.measured({"other": {"left": [0.1, 0, 0]}}).moves[0] == prediction.moves[0]
+
+
+def test_the_tables_show_what_the_dry_run_refined() -> None:
+    """A mode the dry run refines shows analytic -> dry run (-> fused): in `executive plan`'s line
+    and the console's physics table, with rollouts and without."""
+    from executive.console.risk_table import physics_table
+    from executive.report.plots import _fused_text
+
+    dry = {"analytic": 0.0, "measured": 0.021}
+    without = {"dry_run": {"outcome": "success"}, "rollouts": 0, "outcomes": {}, "modes": {"tracking": dry}}
+    assert _fused_text(without) == "; analytic->dry run tracking 0.000->0.021"
+    fused = {**dry, "fused": 0.015, "interval": [0.0, 0.11], "failures": 0}
+    modes = {"collision": {"analytic": 0.05, "fused": 0.04, "interval": [0.0, 0.2]}, "tracking": fused}
+    rolled = {"dry_run": {"outcome": "success"}, "rollouts": 4, "outcomes": {"success": 4}, "modes": modes}
+    assert _fused_text(rolled).endswith("tracking 0.000->0.021->0.015 [0.000, 0.110]")
+    row = {"name": "left", "feasible": True, "value": 0.3, "risk": {"combined": 0.1}, "physics": without}
+    assert "→ 0.021 |" in physics_table([row])
+    assert "≈0 → 0.021 → 0.015 [≈0, 0.11] |" in physics_table([{**row, "physics": rolled}])
