@@ -14,10 +14,11 @@ Per alternative (:func:`drop_model`, registered by :mod:`executive.decision.asse
 
 Execution (:mod:`executive.risk.tracking`): the hand's predicted error at the end of the move
 onto the object shifts the approach's window and the grip along the jaws; its error at the end
-of the place, with the release's spread, moves where the object rests
-(:mod:`executive.risk.placement_spread`). A dry run measures where the object really came to
-rest on the estimate (its record's ``placement_offset``): :func:`drop_measured` puts that offset
-in place of the predicted one for the final placement.
+of the place moves where the object rests (:mod:`executive.risk.placement_spread`); an object
+set down and taken again (a regrasp) carries the set-down's spread into its next grasp. What
+the statics do not predict (the releases, slips in the grip, the base's lag) a dry run measures:
+where the object came to rest on the estimate (its record's ``placement_offset``), which
+:func:`drop_measured` puts in place of the predicted offset of the final placement.
 """
 
 from __future__ import annotations
@@ -93,10 +94,9 @@ class HandExecution:
         return cls(at[0], at[1], there[0], there[1], place)
 
     def spread(self) -> ExecutionSpread:
-        """Where the place's hand error and the set-down put the object, in the table plane."""
-        return ExecutionSpread(
-            np.asarray(self.place[:2], dtype=float), float(np.hypot(self.place_sigma, SET_DOWN_SIGMA))
-        )
+        """Where the place's predicted hand error puts the object, in the table plane (the
+        release's own shift is not predicted: a dry run measures it, :func:`drop_measured`)."""
+        return ExecutionSpread(np.asarray(self.place[:2], dtype=float), float(self.place_sigma))
 
 
 def drop_model(ctx: PlanContext) -> RiskReport:
@@ -221,8 +221,8 @@ def _placed_from_hand(
     horizontal axis) says it is; the grip's error lands on the target. Beyond the detector's
     ``place_position_tol`` in the table plane it is misplaced: for an isotropic 2-D Gaussian
     error, P(|e| > tol) = exp(-tol^2 / (2 sigma^2 / looks)) (the Rayleigh distribution's tail).
-    With ``tracking``, the place's hand error and the release add their bias and spread (a
-    non-central tail, :func:`executive.risk.placement_spread.gaussian_exceed`). A plan that
+    With ``tracking``, the place's predicted hand error adds its bias and spread (a non-central
+    tail, :func:`executive.risk.placement_spread.gaussian_exceed`). A plan that
     places nothing: 0.
     """
     severity = world.scenario.risk.severity.drop
@@ -237,8 +237,7 @@ def _placed_from_hand(
     if at is None:
         p = float(np.exp(-(tol**2) / (2 * sigma**2))) if sigma > 0 else 0.0
     else:
-        spread = float(np.hypot(at[1], SET_DOWN_SIGMA))
-        p = gaussian_exceed(at[0][:2], float(np.hypot(sigma, spread)), tol)
+        p = gaussian_exceed(at[0][:2], float(np.hypot(sigma, at[1])), tol)
     details: dict[str, float | str] = {"grasp": "none: held from the start", "grip_looks": float(looks)}
     details["misplace_probability"] = p
     details.update(

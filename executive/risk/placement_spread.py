@@ -43,9 +43,9 @@ __all__ = [
 
 FloatArray = NDArray[np.float64]
 
-#: m per axis: where a set-down leaves the object beyond the hand's predicted error at the place,
-#: before a dry run measured it: the release, the retreat and the moves' unmodelled errors
-#: (docs/risk_models.md, "Placement spread").
+#: m per axis: where a set-down leaves the object beyond the hand's predicted error at the place
+#: (the release, the retreat, the moves' unmodelled errors), which a later grasp of it meets (a
+#: regrasp); docs/risk_models.md, "Placement spread".
 SET_DOWN_SIGMA = 0.002
 #: m per axis: where a set-down leaves the object from truth to truth about where the dry run
 #: left it, beyond the grip's error along the jaws (docs/risk_models.md, "Placement spread").
