@@ -72,7 +72,7 @@ def test_a_behaviour_says_its_verdict_and_one_without_a_verdict_did_not_do_its_t
     assert stalled.fail("tracking", "hand 37 mm from its planned end") == py_trees.common.Status.FAILURE
     failure = behaviour_failure(stalled, 3.5)
     assert (failure.mode, failure.time) == ("tracking", 3.5)
-    assert failure.detail == "left.transfer: hand 37 mm from its planned end"  # its name, once
+    assert failure.detail == "hand 37 mm from its planned end"  # the run's message adds its name, once
     assert behaviour_failure(py_trees.behaviours.Failure("plug-in"), 1.0).mode == "task"
     assert behaviour_failure(None, 1.0).mode == "task"
     bogus = Release("bogus", "left", "book")

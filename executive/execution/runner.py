@@ -62,6 +62,7 @@ class RunResult:
     statuses: list[str] = field(default_factory=list)  # root status after each tick, run-length encoded
     placement_error_m: float | None = None
     placement_offset: tuple[float, float] | None = None  # where the object rests less its target (x, y; m)
+    behaviour: str = ""  # the behaviour that failed (its message is the failure's detail)
     #: per move that ended, per hand: where its site ended less its planned end (m, world frame)
     end_errors: dict[str, dict[str, list[float]]] = field(default_factory=dict)
     restances: list[dict[str, Any]] = field(default_factory=list)  # re-plans after walks (their log records)
@@ -135,6 +136,7 @@ def execute_plan(
         tip = root.tip()
         feedback = tip.feedback_message if tip else ""
         result.failure = robot.failure or behaviour_failure(tip, float(truth.data.time))
+        result.behaviour = tip.name if tip else ""
         result.outcome = "failed"
         result.message = f"{tip.name if tip else plan.name}: {feedback}"
     else:
@@ -196,17 +198,15 @@ def behaviour_failure(behaviour: py_trees.behaviour.Behaviour | None, time_s: fl
     The verdict is one of the failure-mode table's (:mod:`executive.schema.failure_modes`):
     ``drop`` (a grasp that holds nothing), ``tracking`` (a hand stalled short of its plan),
     ``guard``, ``task`` (a press whose force was not reached). A behaviour that fails without
-    one did not do its task: ``task``. The detail is the behaviour's name and its message (a
-    behaviour's message never repeats its own name).
+    one did not do its task: ``task``. The detail is the behaviour's message (which does not
+    repeat its own name: the run's message and record name the behaviour once).
 
     Raises:
         ExecutiveError: the verdict is not in the table.
     """
     verdict = str(getattr(behaviour, "verdict", "") or "task")
     mode_of_verdict(verdict)  # raises for a verdict the table does not know
-    if behaviour is None:
-        return Failure(verdict, "", time_s)
-    return Failure(verdict, f"{behaviour.name}: {behaviour.feedback_message}", time_s)
+    return Failure(verdict, behaviour.feedback_message if behaviour is not None else "", time_s)
 
 
 def run_alternative(
@@ -277,6 +277,7 @@ def outcome_fields(result: RunResult) -> dict[str, Any]:
         out["outcome"] = mode
         out["failure"] = {
             "mode": mode,
+            "behaviour": result.behaviour,
             "detail": failure.detail if failure is not None else result.message,
             "time": round(failure.time, 6) if failure is not None else None,
             "bodies": list(failure.bodies) if failure is not None else [],
