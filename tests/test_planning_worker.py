@@ -175,7 +175,7 @@ def test_a_job_past_its_deadline_is_a_hang_though_the_worker_beats() -> None:
     assert "hangs: a job has run for" in lost.value.reason and "limit 0.3 s" in lost.value.reason
     assert noticed > 0.3  # not before the deadline
     # and by the first poll past it: every poll that found nothing amiss was asked within 0.3 s
-    assert all(asked - submitted <= 0.3 for asked in quiet), (quiet[-1] - submitted)
+    assert all(asked - submitted <= 0.3 for asked in quiet), quiet[-1] - submitted
 
 
 def test_a_forked_child_does_not_take_its_parents_idle_worker() -> None:
@@ -208,7 +208,8 @@ def _until_stopped(pid: int, within_s: float = 60.0) -> bool:
     for the process to get a core); whether they were within ``within_s`` (a hang guard)."""
     deadline = time.monotonic() + within_s
     while time.monotonic() < deadline:
-        states = {p.read_text().rsplit(")", 1)[1].split()[0] for p in Path(f"/proc/{pid}/task").glob("*/stat")}
+        stats = Path(f"/proc/{pid}/task").glob("*/stat")
+        states = {p.read_text().rsplit(")", 1)[1].split()[0] for p in stats}
         if states and states <= {"T", "t"}:
             return True
         time.sleep(0.001)
