@@ -27,11 +27,11 @@ from executive.monitoring.detectors import DetectorError, DetectorThresholds, Fa
 from executive.monitoring.live_risk import LiveRiskMonitor
 from executive.planning.plan import AlternativePlan
 from executive.planning.planner import Planner
-from executive.planning.stepping_geometry import yaw_of
 from executive.scenario import load, loads
 from executive.schema.failure_modes import mode_of_verdict
 from executive.schema.types import Scenario
 from executive.tasks.steps import build_subtree, plan_alternative
+from executive.world.heading import yaw_of
 from executive.world.model import World, build
 
 Status = py_trees.common.Status

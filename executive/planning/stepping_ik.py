@@ -23,10 +23,10 @@ from executive.planning.limits import GeomPairCollisionLimit, SupportPolygon, Su
 from executive.planning.problem import PlanningProblem
 from executive.planning.rotation import rotation_angle, rotation_log
 from executive.planning.stepping_ankles import AnkleReserveLimit, reserve_limit, waist_roll
-from executive.planning.stepping_geometry import yaw_quat
 from executive.planning.stepping_knees import KneeBendLimit, find_knees
 from executive.planning.stepping_types import StepConfig
 from executive.planning.types import PlanningError, attach_object
+from executive.world.heading import yaw_quat
 from executive.world.model import is_descendant
 
 __all__ = ["PhaseGoal", "StepIK", "StepPlanningError"]

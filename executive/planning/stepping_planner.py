@@ -21,11 +21,12 @@ from numpy.typing import NDArray
 
 from executive.planning.limits import GeomPairCollisionLimit, SupportPolygon
 from executive.planning.problem import PlanningProblem
-from executive.planning.stepping_geometry import circular_mean, foot_pose, foothold_of, yaw_of
+from executive.planning.stepping_geometry import circular_mean, foot_pose, foothold_of
 from executive.planning.stepping_ik import PhaseGoal, StepIK, StepPlanningError
 from executive.planning.stepping_types import Foothold, StepConfig, StepPhase, StepPlan
 from executive.planning.timing import Frames, TimedJoints, Trajectory, build_trajectory
 from executive.planning.types import PlannerConfig, PlanningError, PlanningInputError
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
 __all__ = ["StepPlanner"]

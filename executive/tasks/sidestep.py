@@ -22,9 +22,10 @@ from numpy.typing import NDArray
 
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import PlanningError
-from executive.tasks.hands import HandFrames, yaw_of
+from executive.tasks.hands import HandFrames
 from executive.tasks.phases import back_along_lane, lane_carry, one_hand_layout, pick, place
 from executive.tasks.placement import Destination, target_placement
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
 __all__ = ["SIDESTEPS", "sidestep_stance", "transfer"]

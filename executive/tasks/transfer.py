@@ -39,10 +39,11 @@ from executive.tasks import handover as handover_steps
 from executive.tasks import regrasp as regrasp_steps
 from executive.tasks import sidestep as sidestep_steps
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
-from executive.tasks.hands import ONE_HAND, HandFrames, yaw_of
+from executive.tasks.hands import ONE_HAND, HandFrames
 from executive.tasks.phases import one_hand_leg
 from executive.tasks.pick_place import PlaceTask, place_steps, site_offset
 from executive.tasks.placement import placed_verdict, target_placement
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
 __all__ = ["HANDOVERS", "REGRASPS", "SIDESTEPS", "TransferKind", "TransferTask", "transfer_steps"]
