@@ -8,10 +8,10 @@ observed fall rate with its 95% Clopper-Pearson interval, then the pooled ROC AU
 falls and the executive's cross-fitted regret (:mod:`executive.validation.regret`), both ways.
 
     python -m benchmarks.bench_fall_campaign [--trials 8] [--jobs 2] [--out DIR]
-        [--set fit|check|all] [--report]
+        [--set fit|check|all] [--report] [--ablation]
 
-About 2 minutes per variant with 2 jobs (12 variants); --report tabulates what --out holds.
-Results: docs/stepping.md, "Falls".
+About 6 minutes for the 20 variants with 2 jobs on an idle machine; --report tabulates what --out
+holds; --ablation scores the walk's gains on the CoM bias apart. Results: docs/stepping.md, "Falls".
 """
 
 from __future__ import annotations
@@ -44,7 +44,7 @@ from executive.world.model import build
 ROOT = Path(__file__).resolve().parents[1]
 BASE = ROOT / "scenarios" / "fall_steps.yaml"
 SIGMAS = (0.01, 0.02, 0.035, 0.05, 0.08)
-#: The goal stances measured while the single-support gain was derived (fit) and those kept apart (check).
+#: The goals physics was measured on by hand while the fall model was made (fit) and those kept apart (check).
 GOALS = {"fit": ((0.4, 0.0), (0.0, 0.3)), "check": ((0.3, 0.2), (-0.2, 0.0))}
 
 

@@ -110,7 +110,7 @@ def _per_knot(
     polygons: KnotPolygons, scored: KnotPolygons, mus: FloatArray, xi: FloatArray, cov: FloatArray
 ) -> dict[str, FloatArray]:
     """Per knot: signed margin of ``mus``, capture margin of ``xi`` (in ``polygons``), exact and
-    Boole P(outside) (in ``scored``: the polygons shrunk by the single-support gain)."""
+    Boole P(outside) (in ``scored``: the polygons shrunk by the walk's gain on the bias)."""
     count = len(mus)
     out = {name: np.zeros(count) for name in ("margin", "capture", "probability", "lower", "upper")}
     for size, (knots, verts) in polygons.groups.items():
