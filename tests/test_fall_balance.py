@@ -23,7 +23,7 @@ import pytest
 import yaml
 
 from executive.execution.simulated import SimulatedRobot
-from executive.planning.balance_law import STEPPING_GAINS, residual_fractions
+from executive.planning.balance_law import STEPPING_GAINS, BalanceGains, residual_fractions
 from executive.planning.loaded_com import LoadedCoM
 from executive.planning.planner import Planner
 from executive.planning.stepping import Foothold, StepPlanner
@@ -79,7 +79,7 @@ def test_the_residual_is_two_lags_in_series() -> None:
     # The same law with an instant estimate is one exponential; with a == c the double root.
     instant = residual_fractions(np.array([2.0]), [(0.0, 5.0, True)], omega, STEPPING_GAINS, beta)
     assert instant[0] == pytest.approx((c * math.exp(-2 * a) - a * math.exp(-2 * c)) / (c - a))
-    same = STEPPING_GAINS.__class__(integral=1.0 / beta)  # a == c
+    same = BalanceGains(integral=1.0 / beta)  # a == c
     assert residual_fractions(np.array([1.0]), [(0.0, 5.0, True)], omega, same, beta)[0] == pytest.approx(
         (1.0 + omega) * math.exp(-omega)
     )
