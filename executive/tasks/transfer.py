@@ -112,7 +112,7 @@ class TransferKind(TaskKind):
             reason = f"robot '{world.profile.name}' has no {' and no '.join(missing)} arm" if missing else ""
             out.append(Alternative(name, reason))
         for name, side in sidestep_steps.SIDESTEPS.items():
-            out.append(Alternative(name, _cannot_sidestep(world, side)))
+            out.append(Alternative(name, sidestep_steps.cannot_sidestep(world, side)))
         holder = world.held_by(task.object)
         if holder is None:
             return out
@@ -149,14 +149,6 @@ class TransferKind(TaskKind):
 
 
 HANDOVERS_SIDES = {"left_to_right": ("left", "right"), "right_to_left": ("right", "left")}
-
-
-def _cannot_sidestep(world: World, side: str) -> str:
-    """Why ``side`` cannot pick, step sideways and place on this robot ("" if it can)."""
-    if side not in world.profile.sides:
-        return f"robot '{world.profile.name}' has no {side} arm"
-    feet = len(world.profile.feet)
-    return "" if feet == 2 else f"robot '{world.profile.name}' has {feet} feet; a side-step needs two"
 
 
 def one_hand_steps(world: World, task: TransferTask, side: str, cfg: CompositionConfig) -> list[Step]:
