@@ -16,7 +16,10 @@ feet really do:
 Verdicts (the failure-mode table, :mod:`executive.schema.failure_modes`): a fall is the physics
 detector's (``fall``, from :meth:`RobotBehaviour.failed_by_detector`); a foot that does not lift,
 does not come down, or lands farther from its planned foothold than the tolerances fails with
-``tracking`` (the robot did not follow its plan; it still stands).
+``tracking`` (the robot did not follow its plan; it still stands). The step tells the detector
+which feet stand in each phase (``set_phase(support=...)``); when one of them slips (the
+detector's ``slip``) the step first holds on both feet as after a guard's trip
+(:meth:`Step.hold_safely`), then fails with ``slip``, the slip and the hold in its message.
 
 A :class:`behaviours.guard.RiskGuard` wraps a step as it wraps a hand motion (the step is a
 :class:`behaviours.guard.GuardedMotion`): its look-ahead runs along the walk's planned knots, its
@@ -40,18 +43,21 @@ import py_trees
 from behaviours.robot_access import RobotBehaviour
 from executive.planning.limits import SupportPolygon
 from executive.planning.stepping import Foothold, StepPhase, StepPlan
-from executive.planning.stepping_geometry import yaw_of
 from executive.planning.stepping_hold import back_to_both_feet, on_to_both_feet, single_support_left
 from executive.planning.timing import Trajectory, concatenate
 from executive.schema.types import GuardConfig
+from executive.world.heading import yaw_of
 
-__all__ = ["HOLDS", "Step", "foot_force", "foothold", "sole_gap"]
+__all__ = ["HELD_VERDICTS", "HOLDS", "Step", "foot_force", "foothold", "sole_gap"]
 
 Status = py_trees.common.Status
 
 #: How a stopped step holds (:meth:`Step.hold_safely`): ``auto`` (the rule measured safest, below),
 #: ``freeze`` (every joint where it is, as a hand motion), ``plan`` (along the plan to both feet).
 HOLDS = ("auto", "freeze", "plan")
+#: The detector's verdicts after which a step holds on both feet (:meth:`Step.hold_safely`) before
+#: it fails: a foot that slipped leaves the robot standing, a fall does not.
+HELD_VERDICTS = ("slip",)
 #: ``auto`` drops the swing foot where it is when the capture point's error from the plan lies
 #: within 60 degrees of the direction from the stance foot to the swing foot: the robot tips
 #: towards it (docs/stepping.md, "When a guard stops a step").
@@ -107,7 +113,9 @@ class Step(RobotBehaviour):
     switches the feedback off.
 
     Succeeds when the last phase has played and the swing foot carries its share of the body.
-    Fails at once when a physics detector flags a failure (a fall); with ``tracking`` when the
+    Fails at once when a physics detector flags a failure (a fall); after the safe hold
+    (:meth:`hold_safely`) when it flags one of :data:`HELD_VERDICTS` (a foot slip, ``slipped``
+    holds it); with ``tracking`` when the
     swing foot still carries more than ``liftoff_force`` (N) after the lift, is more than
     ``touchdown_gap`` above the floor after the touchdown, first touches the floor more than
     ``landing_tolerance`` (m) or ``landing_yaw_tolerance`` (rad) from its planned foothold, or
@@ -187,6 +195,10 @@ class Step(RobotBehaviour):
         self._ahead_com = np.zeros((0, 3))
         self._ahead_i = 0
         self._balance: Any = None
+        self._carried: tuple[str, str] | None = None
+        self._held = ""  # what hold_safely did, in words
+        self._slipped_in = ""  # the phase a slip came in
+        self.slipped: Any = None  # the detector's Failure the step held after (HELD_VERDICTS)
 
     @property
     def phase(self) -> StepPhase:
@@ -201,20 +213,22 @@ class Step(RobotBehaviour):
         self._ahead_t, self._ahead_i = np.zeros(0), 0
         self.landing, self.landing_error = None, (math.inf, math.inf)
         self.liftoff_residual, self.min_com_margin = math.inf, math.inf
+        self._held, self.slipped = "", None
         holding: dict[str, str] = self.bb.holding
-        carried = next(iter(holding.items()), None) if holding else None
-        self._robot.detector.set_phase(carried=carried)
+        self._carried = next(iter(holding.items()), None) if holding else None
+        self._declare(self.phase)
         self.feedback_message = f"{self.name}: {self.plan.swing} foot to {self.plan.target.describe()}"
 
     def update(self) -> Status:
         robot = self._robot
-        if self.failed_by_detector(robot):
-            return Status.FAILURE
+        if robot.failure is not None:
+            return self._on_detector(robot)
         phase = self.phase
         t = robot.time - self._t0
         self._track(phase, t, robot.control_dt)
         if self._setting_down:
-            return self._set_down(phase, t)
+            status = self._set_down(phase, t)
+            return self._held_after_slip() if self.slipped is not None and self.holding else status
         if len(phase.support) == 1:
             self._watch_com(phase.support[0])
         if phase.name in ("touchdown", "shift_back"):
@@ -239,7 +253,36 @@ class Step(RobotBehaviour):
             )
             return Status.SUCCESS
         self._t0, self._ahead_t, self._ahead_i = robot.time, np.zeros(0), 0
+        self._declare(self.phase)
         return Status.RUNNING
+
+    def _declare(self, phase: StepPhase) -> None:
+        """Tell the detector the phase's support feet (and the object in hand)."""
+        self._robot.detector.set_phase(carried=self._carried, support=phase.support)
+
+    def _on_detector(self, robot: Any) -> Status:
+        """A detector's failure: the safe hold first for :data:`HELD_VERDICTS`, else fail with it."""
+        failure = robot.failure
+        if failure.mode not in HELD_VERDICTS or self.slipped is not None:
+            self.failed_by_detector(robot)
+            if self.slipped is not None:  # a second failure on the way to the hold
+                self.feedback_message += f" (holding after {self._slip_line()})"
+            return Status.FAILURE
+        self._slipped_in = self.phase.name
+        self.slipped = robot.detector.acknowledge()  # watched afresh while the robot holds
+        self.hold_safely(robot)
+        if self.holding:
+            return self._held_after_slip()
+        self.feedback_message = f"{self._slip_line()} (holding)"
+        return Status.RUNNING
+
+    def _slip_line(self) -> str:
+        """The slip's detail, the phase it came in and what the hold did."""
+        return f"{self.slipped.detail} in the '{self._slipped_in}' phase; {self._held}"
+
+    def _held_after_slip(self) -> Status:
+        """Fail with the slip's verdict, its detail and what the hold did."""
+        return self.fail(self.slipped.mode, self._slip_line())
 
     # --- the guard's interface (behaviours.guard.GuardedMotion) ---------------------------------
 
@@ -271,8 +314,16 @@ class Step(RobotBehaviour):
         its foothold, whichever is shorter on one foot (back when the path ahead is what tripped,
         ``clear_ahead`` False); a weight shift undone, a weight shift back finished. ``freeze``:
         the plain hold. ``plan``: the plan, as ``auto`` does when the robot does not tip towards
-        the swing foot. :attr:`holding` turns True once the robot holds.
+        the swing foot. :attr:`holding` turns True once the robot holds. Once started, a second
+        call returns what the first does.
         """
+        if self._setting_down or self.holding:
+            return self._held
+        self._held = self._hold(robot, clear_ahead)
+        return self._held
+
+    def _hold(self, robot: Any, clear_ahead: bool) -> str:
+        """Start :meth:`hold_safely`'s hold; what it does, in words."""
         index = min(self._index, len(self.plan.phases) - 1)
         t = robot.time - self._t0
         one_foot = len(self.plan.phases[index].support) == 1
@@ -297,6 +348,7 @@ class Step(RobotBehaviour):
         self._phases, self._setting_down = phases, True
         self._index, self._t0, self._ahead_t, self._ahead_i = 0, robot.time, np.zeros(0), 0
         self._track(phases[0], 0.0, robot.control_dt)  # this period's target already
+        self._declare(phases[0])
         where = "back down where it lifted from" if back else "down on its foothold"
         if phases[0].name != "set_down":
             return "the weight shifted back onto both feet" if back else "the weight shift back finished"
@@ -328,6 +380,7 @@ class Step(RobotBehaviour):
         if self._index + 1 < len(self._phases):
             self._index += 1
             self._t0, self._ahead_t, self._ahead_i = self._robot.time, np.zeros(0), 0
+            self._declare(self._phases[self._index])
         else:
             self.holding = True
         return Status.RUNNING

@@ -465,6 +465,7 @@ def test_a_carried_object_may_touch_the_table_only_while_being_placed(world: Wor
         "placing": "book",
         "approaching": None,
         "pushing": None,
+        "support": None,
     }
 
 

@@ -50,6 +50,7 @@ def test_every_verdict_maps_to_one_mode_or_an_explicit_outcome() -> None:
         "collision": "collision",
         "fall": "fall",
         "unstable": "fall",  # a simulation that blew up: the robot is no longer controlled
+        "slip": "fall",  # a standing foot slid: the support under the robot moved
         "drop": "drop",
         "tracking": None,
         "guard": None,
@@ -58,9 +59,9 @@ def test_every_verdict_maps_to_one_mode_or_an_explicit_outcome() -> None:
         "error": None,
     }
     assert {o.name for o in outcomes()} == {"tracking", "guard", "task", "timeout", "error"}
-    assert observed_as("fall") == ("fall", "unstable") and observed_as("drop") == ("drop",)
+    assert observed_as("fall") == ("fall", "unstable", "slip") and observed_as("drop") == ("drop",)
     assert failure_mode("fall").terminal and not failure_mode("drop").terminal
-    with pytest.raises(ExecutiveError, match="valid: collision, fall, unstable, drop, tracking"):
+    with pytest.raises(ExecutiveError, match="valid: collision, fall, unstable, slip, drop, tracking"):
         mode_of_verdict("stalled")
 
 

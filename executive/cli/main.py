@@ -21,45 +21,43 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive import __version__
+from executive.cli import plan as plan_command
 from executive.cli import replay as replay_command
 from executive.cli import schema as schema_command
 from executive.cli import tree as tree_command
-from executive.cli.output_paths import check_file, check_folder
+from executive.cli import validation as validation_commands
+from executive.cli.arguments import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_OK,
+    PIXELS,
+    ROLLOUTS,
+    ROLLOUTS_HELP,
+    SCENARIO_HELP,
+    SEED,
+    TCP_PORT,
+    THRESHOLD_HELP,
+    check_out,
+    load_gated,
+    load_scenario,
+)
+from executive.cli.output_paths import check_file
 from executive.cli.signals import interrupted_text, interrupts_held, stop_reason, stop_signals_as_interrupt
 from executive.console import PORT
 from executive.errors import ExecutiveError
 from executive.schema import catalog as registry
 from executive.schema.failure_modes import ScenarioDeprecationWarning
-from executive.schema.types import Scenario, Task
+from executive.schema.types import Scenario
 from executive.tasks.registry import ALLOW_ENV, allowing_modules
 from executive.world.model import World, build
 
 if TYPE_CHECKING:
     from executive.console.commands import RunConsole
-    from executive.decision.assessment import AlternativeRisk
     from executive.report.render import VideoRecorder
 
 __all__ = ["main"]
 
 FloatArray = NDArray[np.float64]
-
-EXIT_OK = 0
-EXIT_FAILED = 1
-EXIT_BAD_INPUT = 2
-
-
-def _load(name: str) -> Scenario:
-    from executive.scenario import load
-
-    return load(name)
-
-
-def _load_gated(args: argparse.Namespace) -> Scenario:
-    """The scenario of ``run`` and ``plan`` with their ``--rollouts`` and ``--threshold`` applied."""
-    from executive.decision.physics_check import with_rollouts
-    from executive.scenario import with_threshold
-
-    return with_threshold(with_rollouts(_load(args.scenario), args.rollouts), args.threshold)
 
 
 def _cmd_list(args: argparse.Namespace) -> int:
@@ -77,7 +75,7 @@ def _cmd_list(args: argparse.Namespace) -> int:
 
 
 def _cmd_validate(args: argparse.Namespace) -> int:
-    scenario = _load(args.scenario)
+    scenario = load_scenario(args.scenario)
     world = build(scenario)
     print(summary(scenario, world))
     return EXIT_OK
@@ -123,7 +121,7 @@ def _cmd_show(args: argparse.Namespace) -> int:
     from executive.report.render import render_png
 
     png = check_file(args.png, "--png")
-    scenario = _load(args.scenario)
+    scenario = load_scenario(args.scenario)
     world = build(scenario)
     out = render_png(world, png, width=args.width, height=args.height)
     print(summary(scenario, world))
@@ -133,18 +131,10 @@ def _cmd_show(args: argparse.Namespace) -> int:
 
 def _cmd_run(args: argparse.Namespace) -> int:
     _check_run_paths(args)
-    scenario = _load_gated(args)
+    scenario = load_gated(args)
     if args.alternative is None:
         return _run_mission(scenario, args)
     return _run_one(scenario, args)
-
-
-def _check_out(args: argparse.Namespace) -> None:
-    """``--out DIR`` (or, without it, the default ``runs/``) must be a folder this process can write."""
-    if args.out:
-        check_folder(args.out, "--out")
-    else:
-        check_folder("runs", "the default run folder (no --out)")
 
 
 def _check_run_paths(args: argparse.Namespace) -> None:
@@ -152,7 +142,7 @@ def _check_run_paths(args: argparse.Namespace) -> None:
     a writable ``.gif`` file (else an ExecutiveError, exit 2). ``--alternative`` writes no run
     folder: the default one is not checked then."""
     if args.out or args.alternative is None:
-        _check_out(args)
+        check_out(args)
     if args.video:
         if Path(args.video).suffix.lower() != ".gif":
             raise ExecutiveError(
@@ -278,207 +268,6 @@ def _run_one(scenario: Scenario, args: argparse.Namespace) -> int:
     return EXIT_OK if result.success else EXIT_FAILED
 
 
-def _cmd_plan(args: argparse.Namespace) -> int:
-    from executive.decision.assessment import assess_task
-    from executive.decision.physics_check import PhysicsCheck
-    from executive.report.plots import risk_json, risk_table
-
-    if args.plot:
-        check_folder(args.plot, "--plot")
-    scenario = _load_gated(args)
-    world = build(scenario)
-    tasks = []
-    physics = PhysicsCheck(scenario.risk.rollouts.jobs)
-    physics.pool.warm()  # the workers start while the planner works
-    q_start: FloatArray | None = None  # home; after a walk, where the chosen walk ends
-    try:
-        for i, task in enumerate(scenario.mission):
-            label = f"{i}: {task.label()}"
-            analytic = assess_task(world, task, q_start=q_start)
-            if not args.json:  # the analytic answer at once, the physics check's after it
-                print(risk_table(scenario, f"{label}, analytic", analytic))
-                print(_checking_text(scenario, analytic), flush=True)
-            alternatives, _ = physics.check(world, analytic, q_start=q_start)
-            tasks.append((label, alternatives))
-            q_start = _stance_after(scenario, world, task, alternatives, q_start)
-            _print_plan(args, scenario, world, i, label, alternatives)
-    finally:
-        physics.close()
-    if args.json:
-        print(risk_json(scenario, tasks))
-    return EXIT_OK
-
-
-def _stance_after(
-    scenario: Scenario,
-    world: World,
-    task: Task,
-    alternatives: list[AlternativeRisk],
-    q_start: FloatArray | None,
-) -> FloatArray | None:
-    """After a task that walks (its kind ``moves_base``, or its chosen alternative walks), the start
-    of the next: where the chosen plan ends, the estimate's base put there; else ``q_start``."""
-    from executive.report.plots import chosen_index
-    from executive.tasks.registry import get as task_kind
-
-    chosen = chosen_index(alternatives, scenario.risk.ordering)
-    plan = alternatives[chosen].plan if chosen is not None else None
-    if plan is None or not (task_kind(task.kind).moves_base or any(plan.walks.values())):
-        return q_start
-    end = plan.ordered_trajectories()[-1].qpos[-1].copy()
-    world.data.qpos[world.base_qpos] = end[world.base_qpos]
-    world.follows_base = True
-    return end
-
-
-def _checking_text(scenario: Scenario, analytic: list[AlternativeRisk]) -> str:
-    feasible = [a.name for a in analytic if a.feasible]
-    n = scenario.risk.rollouts.count
-    rolls = f" and up to {n} rollouts each on sampled truths" if n else ""
-    return f"checking {', '.join(feasible) or 'nothing'} in physics: a dry run on the estimate{rolls} ..."
-
-
-def _print_plan(
-    args: argparse.Namespace,
-    scenario: Scenario,
-    world: World,
-    i: int,
-    label: str,
-    alternatives: list[AlternativeRisk],
-) -> None:
-    """One task's risk table (unless ``--json``) and its plots (``--plot DIR``)."""
-    import mujoco
-
-    from executive.report.plots import plot_alternatives, risk_table
-    from executive.risk.fall import support_polygon
-
-    if not args.json:
-        print(risk_table(scenario, label, alternatives))
-    if args.plot:
-        mujoco.mj_forward(world.model, world.data)
-        polygon = support_polygon(world, world.data, from_contacts=False)
-        for path in plot_alternatives(scenario, alternatives, polygon, Path(args.plot) / f"task{i}"):
-            if not args.json:
-                print(f"plot      {path}")
-
-
-def _cmd_campaign(args: argparse.Namespace) -> int:
-    from executive.validation.campaign import run_campaign, table_text
-
-    _check_jobs(args)
-    _check_out(args)
-    scenario = _load(args.scenario)
-    alternatives = [a.strip() for a in args.alternatives.split(",")] if args.alternatives else None
-    result = run_campaign(
-        scenario,
-        trials=args.trials,
-        jobs=args.jobs,
-        out=args.out,
-        resume=args.resume,
-        backend=args.backend,
-        seed=args.seed,
-        task_index=args.task,
-        alternatives=alternatives,
-        stream=sys.stdout,
-    )
-    print(table_text(result.summary))
-    rate = result.trials_per_s
-    print(
-        f"trials    {result.new_trials} run in {result.elapsed_s:.1f} s wall "
-        f"({rate:.2f} trials/s on {args.jobs} job(s), {args.backend}); {len(result.records)} in all"
-    )
-    print(f"run folder {result.folder} (trials.jsonl, summary.json, table.md, reliability.png)")
-    if result.interrupted or not result.summary["complete"]:
-        print(
-            f"executive campaign: interrupted; {len(result.records)} trial(s) kept. Complete it with: "
-            f"executive campaign {args.scenario} --trials {result.summary['trials_per_alternative']} "
-            f"--resume --out {result.folder}",
-            file=sys.stderr,
-        )
-        return EXIT_FAILED
-    return EXIT_OK
-
-
-def _check_jobs(args: argparse.Namespace) -> None:
-    """``--jobs`` no more than this machine holds (an ExecutiveError naming the limit, exit 2;
-    :mod:`executive.validation.worker_limit`). A Ray cluster at ``RAY_ADDRESS`` is not checked."""
-    from executive.validation.worker_limit import check_jobs
-
-    if getattr(args, "backend", "local") == "ray" and os.environ.get("RAY_ADDRESS"):
-        return
-    check_jobs(args.jobs)
-
-
-def _cmd_fidelity(args: argparse.Namespace) -> int:
-    from executive.validation.fidelity import run_fidelity, table_text
-
-    _check_jobs(args)
-    _check_out(args)
-    scenario = _load(args.scenario)
-    result = run_fidelity(
-        scenario,
-        variants=args.variants,
-        trials=args.trials,
-        jobs=args.jobs,
-        out=args.out,
-        seed=args.seed,
-        rollouts=args.rollouts,
-        resume=args.resume,
-        stream=sys.stdout,
-    )
-    print(table_text(result.summary))
-    print(f"suite folder {result.folder} (summary.json, table.md, reliability.png, variant-KK.yaml and -KK/)")
-    if result.interrupted or not result.summary["complete"]:
-        print(
-            f"executive fidelity: interrupted. Complete it with: executive fidelity {args.scenario} "
-            f"--variants {args.variants} --trials {args.trials} --seed {result.summary['seed']} "
-            f"--rollouts {args.rollouts} --resume --out {result.folder}",
-            file=sys.stderr,
-        )
-        return EXIT_FAILED
-    return EXIT_OK
-
-
-def _whole_number(low: int, high: int, what: str, high_text: str = "") -> Callable[[str], int]:
-    """An argparse ``type=``: a whole number in ``[low, high]``, else a message giving the range
-    (``high_text`` spells ``high`` where digits would not read well)."""
-    valid = f"from {low} to {high_text or high} ({what})"
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text.strip())
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"expected a whole number {valid}, got {text!r}") from None
-        if not low <= value <= high:
-            bound = f"at least {low}" if value < low else f"at most {high_text or high}"
-            raise argparse.ArgumentTypeError(f"must be {bound}, got {value}; valid: {valid}")
-        return value
-
-    parse.__name__ = what
-    return parse
-
-
-_SEED = _whole_number(0, 2**63 - 1, "a seed", "2**63-1")
-_PIXELS = _whole_number(1, 16384, "pixels")
-_PORT = _whole_number(0, 65535, "a TCP port on 127.0.0.1; 0: any free one")
-_ROLLOUTS = _whole_number(0, 10_000, "rollouts per alternative; 0: off")
-_TRIALS = _whole_number(1, 1_000_000, "trials")
-_JOBS = _whole_number(1, 1024, "worker processes")
-_TASK = _whole_number(0, 10_000, "a task index, 0 for the first")
-_JOBS_LIMIT = "at most the usable cores, and the available memory over ~300 MB"
-
-
-_SCENARIO_HELP = "a scenario file path, or the name of a bundled scenario (see `executive list`)"
-_ROLLOUTS_HELP = (
-    "physics rollouts per alternative on truths sampled from the uncertainty (overrides the "
-    "scenario's risk.rollouts.count; 0: off, the dry runs still run)"
-)
-_THRESHOLD_HELP = (
-    "override risk.threshold: above it the lowest-risk alternative needs approval (>= 0 and below "
-    "the largest value risk.ordering can take, so the gate can never be switched off)"
-)
-
-
 def _parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="executive",
@@ -488,10 +277,10 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _add_inspection(sub)
     _add_run(sub)
-    _add_campaign(sub)
-    _add_fidelity(sub)
-    tree_command.add_parser(sub, _SCENARIO_HELP)
-    replay_command.add_parser(sub, _PIXELS, _PORT)
+    plan_command.add_parser(sub)
+    validation_commands.add_parsers(sub)
+    tree_command.add_parser(sub, SCENARIO_HELP)
+    replay_command.add_parser(sub, PIXELS, TCP_PORT)
     _add_console(sub)
     schema_command.add_parser(sub)
     for name, command in sub.choices.items():
@@ -507,28 +296,20 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _add_inspection(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """The commands that look without executing: list, validate, show, plan."""
+    """The commands that look without executing: list, validate, show."""
     p = sub.add_parser("list", help="name the bundled scenarios and robots")
     p.set_defaults(func=_cmd_list)
 
     p = sub.add_parser("validate", help="load a scenario, build its world, print a summary")
-    p.add_argument("scenario", help=_SCENARIO_HELP)
+    p.add_argument("scenario", help=SCENARIO_HELP)
     p.set_defaults(func=_cmd_validate)
 
     p = sub.add_parser("show", help="render the scenario's scene to a PNG (offscreen)")
-    p.add_argument("scenario", help=_SCENARIO_HELP)
+    p.add_argument("scenario", help=SCENARIO_HELP)
     p.add_argument("--png", required=True, help="output PNG file")
-    p.add_argument("--width", type=_PIXELS, default=960, help="picture width in pixels (default 960)")
-    p.add_argument("--height", type=_PIXELS, default=720, help="picture height in pixels (default 720)")
+    p.add_argument("--width", type=PIXELS, default=960, help="picture width in pixels (default 960)")
+    p.add_argument("--height", type=PIXELS, default=720, help="picture height in pixels (default 720)")
     p.set_defaults(func=_cmd_show)
-
-    p = sub.add_parser("plan", help="plan every alternative and print its predicted risk (no execution)")
-    p.add_argument("scenario", help=_SCENARIO_HELP)
-    p.add_argument("--json", action="store_true", help="print the table as JSON for machines")
-    p.add_argument("--plot", metavar="DIR", help="write CoM/support-polygon and distance plots to DIR")
-    p.add_argument("--rollouts", type=_ROLLOUTS, metavar="N", help=_ROLLOUTS_HELP)
-    p.add_argument("--threshold", type=float, metavar="X", help=_THRESHOLD_HELP)
-    p.set_defaults(func=_cmd_plan)
 
 
 def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -537,18 +318,16 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         "run",
         help="run the mission: plan every alternative, gate on risk, execute the lowest-risk one in physics",
     )
-    p.add_argument("scenario", help=_SCENARIO_HELP)
-    p.add_argument("--rollouts", type=_ROLLOUTS, metavar="N", help=_ROLLOUTS_HELP)
-    p.add_argument("--threshold", type=float, metavar="X", help=_THRESHOLD_HELP)
+    p.add_argument("scenario", help=SCENARIO_HELP)
+    p.add_argument("--rollouts", type=ROLLOUTS, metavar="N", help=ROLLOUTS_HELP)
+    p.add_argument("--threshold", type=float, metavar="X", help=THRESHOLD_HELP)
     p.add_argument(
         "--alternative",
         help="execute this alternative of task 0 only (left, right, left_to_right, ...): "
         "no selection, no approval",
     )
     p.add_argument("--exact", action="store_true", help="the truth equals the estimate (no sampled error)")
-    p.add_argument(
-        "--seed", type=_SEED, default=None, help="seed of the sampled truth (default: trials.seed)"
-    )
+    p.add_argument("--seed", type=SEED, default=None, help="seed of the sampled truth (default: trials.seed)")
     p.add_argument(
         "--approve",
         choices=("prompt", "auto", "deny"),
@@ -565,64 +344,8 @@ def _add_run(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
         help="the operator's console: a page on 127.0.0.1 showing the run live, approvals answered there "
         '(pip install ".[console]")',
     )
-    p.add_argument("--console-port", type=_PORT, default=PORT, help=f"the console's port (default {PORT})")
+    p.add_argument("--console-port", type=TCP_PORT, default=PORT, help=f"the console's port (default {PORT})")
     p.set_defaults(func=_cmd_run)
-
-
-def _add_campaign(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """The campaign command."""
-    p = sub.add_parser(
-        "campaign",
-        help="Monte Carlo validation: N sampled truths per alternative executed in physics, "
-        "predicted risk vs observed failures",
-    )
-    p.add_argument("scenario", help=_SCENARIO_HELP)
-    p.add_argument(
-        "--trials", type=_TRIALS, default=None, help="trials per alternative (default: trials.count)"
-    )
-    p.add_argument(
-        "--jobs", type=_JOBS, default=1, help=f"parallel worker processes (default 1; {_JOBS_LIMIT})"
-    )
-    p.add_argument("--out", metavar="DIR", help="run folder (default runs/<timestamp>-<scenario>-campaign)")
-    p.add_argument("--resume", action="store_true", help="complete the campaign in --out DIR")
-    p.add_argument(
-        "--backend",
-        choices=("local", "ray"),
-        default="local",
-        help="local processes (default) or Ray tasks (pip install .[cluster])",
-    )
-    p.add_argument("--seed", type=_SEED, default=None, help="seed of trial 0 (default: trials.seed)")
-    p.add_argument("--task", type=_TASK, default=0, help="index of the mission's task (default 0)")
-    p.add_argument("--alternatives", help="comma-separated subset of the task's alternatives (default: all)")
-    p.set_defaults(func=_cmd_campaign)
-
-
-def _add_fidelity(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
-    """The fidelity command."""
-    p = sub.add_parser(
-        "fidelity",
-        help="variation suite: K seeded variants of the scene, a campaign on each; does the risk "
-        "ranking hold (predicted vs observed, regret of the per-trial choice)?",
-    )
-    p.add_argument("scenario", help=_SCENARIO_HELP)
-    p.add_argument("--variants", type=int, default=10, help="number of scene variants K (default 10)")
-    p.add_argument("--trials", type=int, default=10, help="trials per alternative and variant (default 10)")
-    p.add_argument(
-        "--jobs",
-        type=_JOBS,
-        default=1,
-        help=f"parallel worker processes per campaign (default 1; {_JOBS_LIMIT})",
-    )
-    p.add_argument("--out", metavar="DIR", help="suite folder (default runs/<timestamp>-<scenario>-fidelity)")
-    p.add_argument("--seed", type=_SEED, default=None, help="seed of the variants (default: trials.seed)")
-    p.add_argument(
-        "--rollouts",
-        type=_ROLLOUTS,
-        default=0,
-        help="risk.rollouts.count of every variant (default 0: off, whatever the scenario says)",
-    )
-    p.add_argument("--resume", action="store_true", help="complete the suite in --out DIR")
-    p.set_defaults(func=_cmd_fidelity)
 
 
 def _add_console(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None:
@@ -632,8 +355,8 @@ def _add_console(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> No
         help="the operator's console on 127.0.0.1: a run folder's decisions, or a scenario's alternatives "
         'planned and checked but not executed (pip install ".[console]")',
     )
-    p.add_argument("target", help="a run folder, or " + _SCENARIO_HELP)
-    p.add_argument("--port", type=_PORT, default=PORT, help=f"the page's port (default {PORT})")
+    p.add_argument("target", help="a run folder, or " + SCENARIO_HELP)
+    p.add_argument("--port", type=TCP_PORT, default=PORT, help=f"the page's port (default {PORT})")
     p.set_defaults(func=_cmd_console)
 
 

@@ -91,7 +91,7 @@ def estimate_scenario(world: World) -> Scenario:
     Objects are put where the estimate has them now (position, yaw); the trial-to-trial scene
     variation is dropped: the rollouts' truths are sampled around this one estimate.
     """
-    from executive.tasks.hands import yaw_of
+    from executive.world.heading import yaw_of
 
     scenario = world.scenario
     objects = []
@@ -149,14 +149,16 @@ def run_job(job: RolloutJob) -> dict[str, Any]:
     """Execute ``job`` in physics; its record: alternative, seed, outcome, failure, wall time.
 
     ``outcome`` is ``success``, a failure detector's mode, ``timeout``, or ``error`` (the code
-    raised: a defect, counted, never hidden).
+    raised: a defect, counted, never hidden). What follows a walk inside the plan is re-planned
+    from the stance the robot measures (its odometry seeded by the rollout's truth), with no risk
+    check: nothing is approved yet.
     """
     from executive.execution.runner import error_fields, execute_plan, outcome_fields
 
     t0 = time.perf_counter()
     record: dict[str, Any] = {"alternative": job.plan.name, "seed": job.seed, "failure": None}
     try:
-        result = execute_plan(job.plan, _truth(job), job.plan.task)
+        result = execute_plan(job.plan, _truth(job), job.plan.task, seed=job.seed)
         record.update(outcome_fields(result))
     except Exception as exc:
         record.update(error_fields(exc))
@@ -457,12 +459,15 @@ class PhysicsCheck:
 
     Args:
         jobs: worker processes (``risk.rollouts.jobs``).
+        run_map: runs the physics jobs instead of the pool (e.g. in the calling process, as a
+            campaign's worker does); None: the pool's ``jobs`` worker processes.
 
     Use :meth:`check` on a decision's assessed alternatives; :meth:`close` when done.
     """
 
-    def __init__(self, jobs: int) -> None:
+    def __init__(self, jobs: int, run_map: RunMap | None = None) -> None:
         self.pool = RolloutPool(jobs)
+        self.run_map: RunMap = self.pool if run_map is None else run_map
 
     def check(
         self, world: World, results: Sequence[AlternativeRisk], q_start: np.ndarray | None = None
@@ -473,7 +478,7 @@ class PhysicsCheck:
         analytic = {a.name: a.risk for a in feasible if a.risk is not None}
         scenario = estimate_scenario(world)
         verdict = (
-            check_alternatives(plans, analytic, scenario, self.pool, q_start=q_start)
+            check_alternatives(plans, analytic, scenario, self.run_map, q_start=q_start)
             if plans
             else PhysicsVerdict({})
         )

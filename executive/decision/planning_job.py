@@ -3,7 +3,9 @@
 A selector's decision needs: every alternative of its task planned (mink) and assessed
 (analytic risk) on the estimate, the feasible ones dry-run and rolled out in physics, and the
 lowest-risk one's guarded motions given their planned knots' distances (coal) so that the
-ticks that execute it compute none. :class:`Planning` does all of that for the selectors of one
+ticks that execute it compute none. A :class:`RestanceJob` is the smaller work of re-planning
+what follows a walk inside the running alternative from where the robot measured it stands.
+:class:`Planning` does all of that for the selectors of one
 scenario, on one estimate world, with one planner and collision model per selector (built on
 first use and kept). It runs in a planning worker process
 (:mod:`executive.decision.planning_worker`), or in the ticking process for a synchronous
@@ -33,7 +35,9 @@ from numpy.typing import NDArray
 
 from executive.decision.assessment import AlternativeRisk, assess_task
 from executive.decision.physics_check import PhysicsCheck, PhysicsVerdict
+from executive.decision.restance import Approval, RiskRecheck
 from executive.errors import ExecutiveError
+from executive.planning.restance import RestanceRequest, RestanceResult, defect, replan
 from executive.schema.types import Task
 from executive.world.model import Grip, World
 
@@ -50,6 +54,7 @@ __all__ = [
     "PlanningJob",
     "PlanningResult",
     "PreparedKnots",
+    "RestanceJob",
     "ranked",
 ]
 
@@ -120,6 +125,23 @@ class PlanningJob:
     estimate: EstimateState
     physics: bool = True
     guard: bool = True
+
+
+@dataclass(frozen=True)
+class RestanceJob:
+    """The rest of an alternative to re-plan from the measured stance after a walk inside it.
+
+    selector: the selector asking (its planner and collision model are used).
+    request: what to re-plan and from where (:class:`executive.planning.restance.RestanceRequest`).
+    estimate: the estimate's state to plan on.
+    approval: what was approved of the alternative (its risk is re-checked against it); None:
+        not checked.
+    """
+
+    selector: str
+    request: RestanceRequest
+    estimate: EstimateState
+    approval: Approval | None = None
 
 
 @dataclass(frozen=True)
@@ -269,6 +291,21 @@ class Planning:
             failure = PlanningFailure(executive, text, traceback.format_exc())
             return PlanningResult([], None, failure=failure, pid=os.getpid(), work_s=time.perf_counter() - t0)
         return PlanningResult(results, verdict, knots, pid=os.getpid(), work_s=time.perf_counter() - t0)
+
+    def serve(self, job: PlanningJob | RestanceJob) -> PlanningResult | RestanceResult:
+        """Work out ``job``: a decision (:meth:`run`) or a rest to re-plan (:meth:`restance`)."""
+        return self.restance(job) if isinstance(job, RestanceJob) else self.run(job)
+
+    def restance(self, job: RestanceJob) -> RestanceResult:
+        """Re-plan the rest of ``job`` from the measured stance with the selector's planner, its risk
+        checked against the approval (:func:`executive.planning.restance.replan`)."""
+        try:
+            job.estimate.apply(self.estimate)
+            planner, collision = self.tools(job.selector)
+            check = RiskRecheck(job.approval, collision) if job.approval is not None else None
+            return replan(planner, self.estimate, job.request, check)
+        except Exception as exc:  # a defect: the rest must not run on it
+            return defect(exc)
 
     def _prepare(self, task: Task, feasible: list[AlternativeRisk]) -> tuple[PreparedKnots, ...]:
         """The guard distances of the lowest-risk alternative's planned knots, per motion step.

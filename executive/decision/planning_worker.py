@@ -32,7 +32,8 @@ from executive.decision.priority import normal_policy_children
 from executive.errors import ExecutiveError
 
 if TYPE_CHECKING:
-    from executive.decision.planning_job import PlanningJob, PlanningResult
+    from executive.decision.planning_job import PlanningJob, PlanningResult, RestanceJob
+    from executive.planning.restance import RestanceResult
     from executive.schema.types import Scenario
 
 __all__ = [
@@ -136,7 +137,7 @@ def _serve(
                 planning = Planning.of_scenario(payload, jobs, physics=planning.physics)
                 conn.send(("ready", ticket, os.getpid()))
             else:
-                conn.send(("result", ticket, planning.run(payload)))
+                conn.send(("result", ticket, planning.serve(payload)))
     finally:
         stop.set()
         planning.close()
@@ -151,7 +152,7 @@ class _Instance:
     beat: Any  # shared double: the worker's last heartbeat (time.monotonic), 0 before the first
     started: float
     key: tuple[int, int]  # (rollout jobs, niceness): what a worker taken from the idle ones must have
-    inbox: dict[int, PlanningResult] = field(default_factory=dict)
+    inbox: dict[int, PlanningResult | RestanceResult] = field(default_factory=dict)
     pending: set[int] = field(default_factory=set)  # tickets sent and neither answered nor forgotten
     unanswered: dict[int, float] = field(default_factory=dict)  # ticket -> when sent; forgotten too
     generation: int = 0  # scenarios it was given after its first: its "ready" for the last one counts
@@ -176,7 +177,7 @@ class _Instance:
                 self.inbox[ticket] = payload.native()
                 self.pending.discard(ticket)
 
-    def send_job(self, ticket: int, job: PlanningJob) -> None:
+    def send_job(self, ticket: int, job: PlanningJob | RestanceJob) -> None:
         """Send ``job`` under ``ticket`` (raises OSError if the worker's end is closed)."""
         self.pending.add(ticket)
         self.unanswered[ticket] = time.monotonic()
@@ -435,8 +436,11 @@ class PlanningWorker:
             time.sleep(0.01)
         return self._now.ready
 
-    def submit(self, job: PlanningJob) -> int:
+    def submit(self, job: PlanningJob | RestanceJob) -> int:
         """Send ``job`` to the worker (queued while it starts); the ticket to :meth:`poll` with.
+
+        A :class:`PlanningJob` is answered with a :class:`PlanningResult`, a :class:`RestanceJob`
+        (the rest of a running alternative re-planned after a walk) with a :class:`RestanceResult`.
 
         Raises:
             WorkerLost: the worker is already gone (its end of the pipe is closed).
@@ -454,7 +458,7 @@ class PlanningWorker:
             raise WorkerLost(reason, self.pid) from exc
         return ticket
 
-    def poll(self, ticket: int) -> PlanningResult | None:
+    def poll(self, ticket: int) -> PlanningResult | RestanceResult | None:
         """The result of ``ticket`` if it has come (taken out), else None. Never blocks.
 
         Raises:

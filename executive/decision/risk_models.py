@@ -5,7 +5,7 @@ a function of the planned alternative (:class:`PlanContext`) that returns the mo
 :class:`executive.risk.report.RiskReport`. The built-in models (collision, fall, drop) are
 registered by :mod:`executive.decision.assessment`; a new mode registers its own::
 
-    register_model("slip", lambda ctx: RiskReport("slip", p, (p, p), ctx.severity("slip"), p))
+    register_model("spill", lambda ctx: RiskReport("spill", p, (p, p), ctx.severity("spill"), p))
 """
 
 from __future__ import annotations

@@ -23,6 +23,7 @@ import numpy as np
 import py_trees
 
 from behaviours.guard import LIVE_RISK_KEY
+from behaviours.restance import REPLANNER_KEY
 from behaviours.robot_access import NAMESPACE
 from executive.decision.approval import ApprovalChannel, ApprovalDecision, PendingApproval
 from executive.decision.assessment import AlternativeRisk
@@ -30,6 +31,7 @@ from executive.decision.audit import AuditLog
 from executive.decision.physics_check import PhysicsCheck
 from executive.decision.planning_job import EstimateState, PlanningJob, ranked
 from executive.decision.planning_worker import PlanningWorker, WorkerLost
+from executive.decision.restance import Approval
 from executive.decision.selector_failure import check_placed, closest_call, failure_of, is_terminal
 from executive.decision.selector_gate import ApprovalGate
 from executive.decision.selector_planning import (
@@ -38,6 +40,7 @@ from executive.decision.selector_planning import (
     object_state,
     refresh_estimate,
 )
+from executive.decision.selector_restance import SelectorReplanner
 from executive.decision.selector_rows import ranking_rows, risk_row, task_label
 from executive.decision.selector_swap import ResultSwap, swap_children
 from executive.errors import ExecutiveError
@@ -133,6 +136,7 @@ class RiskSelector(py_trees.composites.Composite):
         self.bb.register_key("robot", access=py_trees.common.Access.READ)
         self.bb.register_key("holding", access=py_trees.common.Access.WRITE)
         self.bb.register_key(LIVE_RISK_KEY, access=py_trees.common.Access.READ)
+        self.bb.register_key(REPLANNER_KEY, access=py_trees.common.Access.WRITE)
 
     @property
     def worker(self) -> PlanningWorker | None:
@@ -374,6 +378,10 @@ class RiskSelector(py_trees.composites.Composite):
         self._gate.check(name, value)  # the risk gate's invariant: raises ExecutiveError
         self.chosen, self.chosen_risk = name, risk_row(alt, self.ordering)
         self._walked = self._walked or bool(alt.plan is not None and any(alt.plan.walks.values()))
+        # What follows a walk inside it is re-planned from the measured stance, within this approval.
+        approval = Approval.of(value, self.threshold, self.ordering)
+        replanner = SelectorReplanner(self.name, name, self._link, self.estimate, self.log, approval)
+        self.bb.set(REPLANNER_KEY, replanner)
         self.current_child = self._by_name[name]
         self.tried.append(name)
         self.log.record(
@@ -411,6 +419,7 @@ class RiskSelector(py_trees.composites.Composite):
         return Status.RUNNING
 
     def _finish(self, outcome: str, failure: dict[str, Any] | None) -> Status:
+        self.bb.set(REPLANNER_KEY, None)
         self.outcome = outcome
         if failure is not None:
             self.failure = failure

@@ -131,6 +131,7 @@ class PlanningLink:
             raise self.lost
         assert self.worker is not None and self.ticket is not None
         result = self.worker.poll(self.ticket)
+        assert result is None or isinstance(result, PlanningResult)  # a decision's ticket
         if result is not None:
             self.ticket = None
             self.result = result

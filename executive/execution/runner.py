@@ -16,17 +16,20 @@ from typing import Any
 import numpy as np
 import py_trees
 
+from behaviours.restance import Restance, install_replanner
 from behaviours.robot_access import NAMESPACE, install
 from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.detectors import Failure, FailureDetector
 from executive.planning.plan import AlternativePlan, held_at_start
 from executive.planning.planner import Planner, PlanningError
+from executive.planning.restance import LocalReplanner, Replanner
 from executive.schema.failure_modes import mode_of_verdict
 from executive.schema.types import Scenario
 from executive.tasks.base import Task
 from executive.tasks.registry import get as task_kind
 from executive.tasks.steps import plan_alternative
 from executive.world.model import World, build, sample_perturbation
+from executive.world.observation import SimulatedSensor
 
 __all__ = [
     "RunResult",
@@ -57,6 +60,7 @@ class RunResult:
     max_tick_s: float = 0.0
     statuses: list[str] = field(default_factory=list)  # root status after each tick, run-length encoded
     placement_error_m: float | None = None
+    restances: list[dict[str, Any]] = field(default_factory=list)  # re-plans after walks (their log records)
 
     @property
     def success(self) -> bool:
@@ -73,15 +77,29 @@ def execute_plan(
     task: Task,
     control_dt: float = 0.02,
     time_limit_s: float | None = None,
+    *,
+    replanner: Replanner | None = None,
+    seed: int | None = None,
 ) -> RunResult:
     """Tick the plan's subtree against the truth world until it finishes; check the placement.
 
     The detectors decide every failure as in a mission; the closest call (a report, never a
     failure) is not computed: nothing reads it from a batch run.
+
+    Args:
+        plan, truth, task: the plan (made on the estimate), the world physics runs, its task.
+        control_dt, time_limit_s: the control period; the simulated time allowed (None: the
+            plan's duration and 10 s).
+        replanner: re-plans what follows a walk from the measured stance
+            (:mod:`executive.planning.restance`); None: a :class:`LocalReplanner` on the
+            estimate of ``truth``'s scenario, with no risk check.
+        seed: the seed of the robot's sensors (its odometry); None: the scenario's ``trials.seed``.
     """
     detector = FailureDetector(truth, distance_stride=0)
-    robot = SimulatedRobot(truth, control_dt=control_dt, detector=detector)
+    sensor = SimulatedSensor(truth, seed) if seed is not None else None
+    robot = SimulatedRobot(truth, control_dt=control_dt, detector=detector, sensor=sensor)
     install(robot)
+    install_replanner(replanner if replanner is not None else LocalReplanner(truth.scenario))
     hold_from_start(robot, held_at_start(plan.steps))
     root = task_kind(task.kind).subtree(plan)
     tree = py_trees.trees.BehaviourTree(root)
@@ -105,6 +123,7 @@ def execute_plan(
     result.wall_s = time.perf_counter() - start
     result.physics_wall_s = robot.stats.physics_wall_s
     result.sim_time_s = float(truth.data.time)
+    result.restances = [n.record for n in root.iterate() if isinstance(n, Restance) and n.record is not None]
     if root.status == Status.SUCCESS:
         _verify(result, task, truth, robot.detector)
     elif root.status == Status.FAILURE:
@@ -179,7 +198,11 @@ def run_alternative(
     seed: int | None = None,
     control_dt: float = 0.02,
 ) -> RunResult:
-    """Plan ``alternative`` of a task on the estimate and execute it in a (sampled) truth world."""
+    """Plan ``alternative`` of a task on the estimate and execute it in a (sampled) truth world.
+
+    What follows a walk inside the alternative is re-planned from the measured stance with the
+    same planner (no risk check: nothing was approved).
+    """
     task = scenario.mission[task_index]
     estimate = build(scenario)
     if exact:
@@ -188,12 +211,14 @@ def run_alternative(
         rng = np.random.default_rng(scenario.trials.seed if seed is None else seed)
         truth = build(scenario, sample_perturbation(scenario, rng), kind="truth")
     t0 = time.perf_counter()
+    planner = Planner(estimate)
     try:
-        plan = plan_alternative(Planner(estimate), estimate, task, alternative)
+        plan = plan_alternative(planner, estimate, task, alternative)
     except PlanningError as exc:
         return RunResult(alternative, "planning_failed", message=str(exc), plan_s=time.perf_counter() - t0)
     plan_s = time.perf_counter() - t0
-    result = execute_plan(plan, truth, task, control_dt=control_dt)
+    replanner = LocalReplanner(estimate, planner)
+    result = execute_plan(plan, truth, task, control_dt=control_dt, replanner=replanner, seed=seed)
     result.plan_s = plan_s
     return result
 
@@ -214,6 +239,8 @@ def outcome_fields(result: RunResult) -> dict[str, Any]:
     out: dict[str, Any] = {"sim_time_s": round(result.sim_time_s, 6)}
     if result.placement_error_m is not None:
         out["placement_error_m"] = round(result.placement_error_m, 6)
+    if result.restances:
+        out["restance"] = result.restances
     if result.outcome == "success":
         out["outcome"] = "success"
     elif result.outcome == "timeout":

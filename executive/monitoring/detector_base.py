@@ -72,6 +72,16 @@ class DetectorThresholds:
     place_tilt_deg: float = 10.0
     # m; clearances larger than this are not computed (broad phase of the closest call).
     clearance_horizon: float = 0.20
+    # m the part of a standing foot's sole on the floor may slide along it => slip. None: 0.4
+    # of the sole's half width (its middle's distance to its nearest edge; humanoid 30 mm, G1
+    # 14 mm): the room the step planner keeps the CoM inside the stance sole (SLIDE_FRACTION).
+    foot_slip: float | None = None
+    # deg a standing foot may turn about the vertical => slip. None: the turn that moves the
+    # sole's toe by foot_slip (humanoid 13.2 deg, G1 8.9 deg).
+    foot_slip_yaw_deg: float | None = None
+    # share of the robot's weight a foot must carry for its slide to count: a foot that only
+    # skims the floor (a swing foot set down, a weight shifted off it) takes no support away.
+    foot_slip_load: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -118,7 +128,9 @@ class Phase:
 
     carried: (side, object) the hand holds; grasping: (side, object) the hand closes on, or
     (side, obstacle) it presses; placing: the object allowed to touch the table; approaching:
-    (side, object) the open hand moves onto to grasp; pushing: (side, object) the hand slides.
+    (side, object) the open hand moves onto to grasp; pushing: (side, object) the hand slides;
+    support: the feet meant to stand still where they touch the floor (a step's stance foot;
+    None: every foot).
     """
 
     carried: tuple[str, str] | None = None
@@ -126,6 +138,7 @@ class Phase:
     placing: str | None = None
     approaching: tuple[str, str] | None = None
     pushing: tuple[str, str] | None = None
+    support: tuple[str, ...] | None = None
 
 
 class Check(Protocol):

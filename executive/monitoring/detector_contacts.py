@@ -70,6 +70,7 @@ class ContactCheck:
 
     ``codes``: the geom x geom table of the current phase; ``quiet_pairs``: the contact geom
     pairs (bytes) of the last check when all were allowed and silent, which ``check`` skips;
+    ``pairs``: the contact geom pairs (bytes, int32 pairs) of the last check, whatever they were;
     ``closest``: the self-contacts and the largest graze seen so far (a :class:`ClosestCall`
     whose clearance fields stay unset); ``labels``: the pair names of reports.
     """
@@ -96,6 +97,7 @@ class ContactCheck:
         self.codes = self._base_codes.copy()
         self._code_rows: list[list[int]] = self._base_codes.tolist()
         self.quiet_pairs = b""
+        self.pairs = b""
         self.closest = ClosestCall()
 
     def _code_table(
@@ -157,11 +159,12 @@ class ContactCheck:
         """The worst forbidden contact at or above ``collision_force``, or None; updates ``closest``."""
         d = self._d
         if not d.ncon:
+            self.pairs = b""
             return None
         geom = d.contact.geom
         # The same geom pairs as at the last check, which were all allowed and silent (the
         # common case: feet on the floor, a hand on what it holds): nothing to classify.
-        pairs = geom.tobytes()
+        self.pairs = pairs = geom.tobytes()
         if pairs == self.quiet_pairs:
             return None
         codes = self._code_rows

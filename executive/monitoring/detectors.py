@@ -3,7 +3,7 @@
 :class:`FailureDetector` looks only at the MuJoCo state after each ``mj_step`` and at the
 phase the executing behaviour declares (``set_phase``), independent of the planner and the
 risk models. It runs one check per verdict family in a fixed order (stability, fall, hold,
-contacts: the first failure of a step wins) and latches the first failure; it also keeps
+contacts, foot slip: the first failure of a step wins) and latches the first failure; it also keeps
 the closest call for the report. The verdicts, what is allowed and what each check costs:
 docs/detectors.md.
 """
@@ -25,6 +25,7 @@ from executive.monitoring.detector_base import (
 from executive.monitoring.detector_clearance import Clearance
 from executive.monitoring.detector_contacts import ContactCheck
 from executive.monitoring.detector_fall import FallCheck
+from executive.monitoring.detector_foot_slip import FootSlip, FootSlipCheck
 from executive.monitoring.detector_objects import HoldCheck, check_placement
 from executive.monitoring.detector_stability import StabilityCheck
 from executive.world.model import World
@@ -36,6 +37,7 @@ __all__ = [
     "DetectorThresholds",
     "Failure",
     "FailureDetector",
+    "FootSlip",
     "Phase",
 ]
 
@@ -46,7 +48,9 @@ class FailureDetector:
     Make one detector per execution, with the world in its start state: the MuJoCo warning
     counters are taken at construction (and the start pelvis height, ``start_height``, for
     the report); the fall limits are the robot's safe posture's unless ``thresholds`` sets them
-    (``standing_height``, ``pelvis_drop`` and ``trunk_tilt_deg`` are those in force).
+    (``standing_height``, ``pelvis_drop`` and ``trunk_tilt_deg`` are those in force); the foot
+    slip limits are the robot's sole's unless it sets them (``foot_slip``, ``foot_slip_yaw_deg``
+    and ``foot_slip_load`` are those in force).
     ``distance_stride``: compute the closest clearance every this many checks (0: never).
     """
 
@@ -62,7 +66,8 @@ class FailureDetector:
         self._hold = HoldCheck(world, th)
         self._contacts = ContactCheck(world, th)
         self._near = Clearance(world, th, self._contacts)
-        checks: tuple[Check, ...] = (self._stability, fall, self._hold, self._contacts)
+        self._slip = FootSlipCheck(world, th, self._contacts)  # reads the contact check's pairs
+        checks: tuple[Check, ...] = (self._stability, fall, self._hold, self._contacts, self._slip)
         self._checks = checks
         self._check_fns = tuple(c.check for c in checks)  # the per-step loop, in verdict order
         self.start_height = float(d.xpos[ids.base_body][2])
@@ -70,6 +75,11 @@ class FailureDetector:
         self.standing_height = fall.standing_height
         #: m below standing and deg from vertical beyond which the robot has fallen.
         self.pelvis_drop, self.trunk_tilt_deg = fall.pelvis_drop, fall.trunk_tilt_deg
+        #: m a standing foot's sole may slide and deg it may turn before it has slipped, and the
+        #: share of the robot's weight it carries for that to count.
+        self.foot_slip, self.foot_slip_yaw_deg = self._slip.slide, self._slip.turn_deg
+        self.foot_slip_load = self._slip.load
+        self._feet = frozenset(self._slip.sides)
         self._sides = frozenset(ids.hand_bodies)
         self._objects = frozenset(ids.object_geoms)
         self._obstacles = frozenset(ids.obstacle_geoms)
@@ -90,6 +100,7 @@ class FailureDetector:
         placing: str | None = None,
         approaching: tuple[str, str] | None = None,
         pushing: tuple[str, str] | None = None,
+        support: tuple[str, ...] | None = None,
     ) -> None:
         """Declare what the behaviour does now; each call replaces the previous phase.
 
@@ -100,10 +111,12 @@ class FailureDetector:
         now is a misaligned grasp (mode ``drop``), not a collision; pushing: (side, object) the
         hand slides along the table: that hand may touch it, it may touch the table and slide
         away from the hand (no hold distance), and it touching another object is a collision.
-        A handover carries with one side and grasps with the other.
+        A handover carries with one side and grasps with the other. support: the feet meant to
+        stand still where they touch the floor (a step's stance foot on one foot); None: every
+        foot (any motion but a step's).
 
         Raises:
-            DetectorError: a side or an object the world does not have.
+            DetectorError: a side, a foot or an object the world does not have.
         """
         for pair in (carried, grasping, approaching, pushing):
             if pair is not None:
@@ -112,7 +125,12 @@ class FailureDetector:
                     require_object(pair[1], self._objects)
         if placing is not None:
             require_object(placing, self._objects)
-        phase = Phase(carried, grasping, placing, approaching, pushing)
+        for foot in support or ():
+            if foot not in self._feet:
+                raise DetectorError(f"no foot '{foot}'; the robot has: {', '.join(sorted(self._feet))}")
+        phase = Phase(
+            carried, grasping, placing, approaching, pushing, None if support is None else tuple(support)
+        )
         for c in self._checks:
             c.set_phase(phase)
         self._near.set_phase(phase)  # after the contact check: it reads the new contact table
@@ -128,6 +146,7 @@ class FailureDetector:
             "placing": p.placing,
             "approaching": p.approaching,
             "pushing": p.pushing,
+            "support": p.support,
         }
 
     # --- results -------------------------------------------------------------------------
@@ -147,6 +166,29 @@ class FailureDetector:
             distance_bodies=near.distance_bodies,
             distance_time=near.distance_time,
         )
+
+    @property
+    def largest_slip(self) -> tuple[FootSlip, FootSlip]:
+        """The largest slide (m) and the largest turn (rad) of a standing foot seen so far, each
+        with its foot and time: how near the feet came to a slip."""
+        return self._slip.largest
+
+    def foot_slip_now(self, side: str) -> FootSlip | None:
+        """The ``side`` foot's slip so far, from its contacts now (how far its points on the
+        floor slid, how much it turned, how fast, under what share of the weight), or None while
+        it does not stand (lifted, or not a support foot of the phase).
+
+        Raises:
+            DetectorError: the robot has no ``side`` foot.
+        """
+        if side not in self._feet:
+            raise DetectorError(f"no foot '{side}'; the robot has: {', '.join(sorted(self._feet))}")
+        return self._slip.measure(side, float(self._d.time))
+
+    @property
+    def slipped(self) -> FootSlip | None:
+        """The last foot slip found (side, distance, turn, speed, time), or None."""
+        return self._slip.slipped
 
     # --- the per-step check --------------------------------------------------------------
 

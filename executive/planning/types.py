@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Literal
 
 import mink
 import mujoco
@@ -73,11 +74,17 @@ class PlanningInputError(ExecutiveError):
 
 @dataclass(frozen=True)
 class HandTarget:
-    """Where a hand site should go: world position and orientation (w x y z)."""
+    """Where a hand site should go: world position and orientation (w x y z).
+
+    ``frame``: what the target is fixed to. ``world`` (an object's pick or place, a lane over the
+    table) stays where it is when the robot's base turns out elsewhere than planned; ``base`` (a
+    home pose) moves with the base (:mod:`executive.planning.restance`).
+    """
 
     side: str
     position: FloatArray
     quat: FloatArray
+    frame: Literal["world", "base"] = "world"
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,8 @@
 """The failure modes: one table that everything listing a mode reads.
 
 A failure mode is a way an alternative can fail that a risk model predicts and a
-detector observes: ``collision``, ``fall`` and ``drop``. Each :class:`FailureMode` says
+detector observes: ``collision``, ``fall`` (its verdicts: ``fall``, ``unstable``, ``slip``)
+and ``drop``. Each :class:`FailureMode` says
 which detector and behaviour verdicts count as it, its severity and seed weight
 defaults (the scenario's ``risk.severity`` and ``risk.weights`` keys are the mode's
 name), whether it ends a task at once, and its labels in tables. Verdicts that are no
@@ -13,7 +14,7 @@ Adding a mode is one :func:`register_mode` call plus its risk model
 (:func:`executive.decision.risk_models.register_model`) and, if physics can observe it,
 a detector check that returns its verdict::
 
-    register_mode(FailureMode("slip", "foot slip", "slip", verdicts=("slip",), severity=5.0))
+    register_mode(FailureMode("spill", "spill", "spill", verdicts=("spill",), severity=5.0))
 """
 
 from __future__ import annotations
@@ -197,11 +198,14 @@ register_mode(
         "fall",
         "fall",
         "fall",
-        verdicts=("fall", "unstable"),
+        verdicts=("fall", "unstable", "slip"),
         severity=10.0,
         weight=2.0,
         terminal=True,
-        description="the robot falls, or its simulation blows up (unstable: no longer controlled)",
+        description=(
+            "the robot falls, a foot it stands on slips, or its simulation blows up "
+            "(unstable: no longer controlled)"
+        ),
     )
 )
 register_mode(

@@ -15,9 +15,10 @@ from numpy.typing import NDArray
 
 from executive.planning.planner import HandTarget
 from executive.planning.types import site_quat
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
-__all__ = ["ONE_HAND", "UP", "HandFrames", "top_down_quat", "yaw_of"]
+__all__ = ["ONE_HAND", "UP", "HandFrames", "top_down_quat"]
 
 FloatArray = NDArray[np.float64]
 UP = np.array([0.0, 0.0, 1.0])
@@ -33,12 +34,6 @@ def top_down_quat(yaw: float) -> FloatArray:
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, np.column_stack([x_axis, y_axis, z_axis]).ravel())
     return quat
-
-
-def yaw_of(quat: FloatArray) -> float:
-    """The z-y-x Euler yaw of a unit quaternion (w x y z)."""
-    w, x, y, z = quat
-    return float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
 
 
 class HandFrames:
@@ -65,8 +60,10 @@ class HandFrames:
         else:
             shift = np.array(stance[:2], dtype=float) - start[:2]
             self._moved = _Walked(start, stance[2] - start_heading, shift)
-        self.home = {
-            side: self._moved.target(HandTarget(side, data.site_xpos[site].copy(), site_quat(data, site)))
+        self.home = {  # poses of the body: they move with the base (frame "base")
+            side: self._moved.target(
+                HandTarget(side, data.site_xpos[site].copy(), site_quat(data, site), frame="base")
+            )
             for side, site in world.ids.hand_sites.items()
         }
         self.base = self._moved.point(start)
@@ -140,7 +137,7 @@ class _Walked:
             return t
         quat = np.zeros(4)
         mujoco.mju_mulQuat(quat, self.quat, np.asarray(t.quat, dtype=float))
-        return HandTarget(t.side, self.point(t.position), quat)
+        return HandTarget(t.side, self.point(t.position), quat, t.frame)
 
 
 def _walked(world: World, start: FloatArray, start_heading: float) -> _Walked:

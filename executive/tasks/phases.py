@@ -8,7 +8,7 @@ across the object's local y extent (:class:`executive.tasks.hands.HandFrames`).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -252,7 +252,8 @@ def back_along_lane(
     ):
         return ()
     back_point = np.array([lane_x, h.home[side].position[1], float(layout.lane[0][2])])
-    return (Step("move", f"{side}.back", side, (h.target(side, back_point, end_yaw, yaw),)),)
+    back = replace(h.target(side, back_point, end_yaw, yaw), frame="base")  # ahead of the hand's home
+    return (Step("move", f"{side}.back", side, (back,)),)
 
 
 def one_hand_leg(

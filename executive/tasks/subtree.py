@@ -3,7 +3,9 @@
 :func:`build_subtree` turns an :class:`executive.planning.plan.AlternativePlan` into a
 py_trees Sequence: a mover per motion step and a footstep per step of a walk (each may be
 wrapped in a live risk guard), a gripper behaviour per grasp and release, and a handover
-(receiver grasps, giver releases, giver retreats) as its own subtree. It is the default of
+(receiver grasps, giver releases, giver retreats) as its own subtree. A walk that more motions
+follow is followed by a :class:`behaviours.restance.Restance`: the robot measures where it stands
+and those motions are re-planned from there before they run. It is the default of
 :meth:`executive.tasks.base.TaskKind.subtree`; a kind with steps of its own passes their
 behaviours in ``make``.
 """
@@ -37,6 +39,7 @@ def build_subtree(
     from behaviours.handover import handover_subtree
 
     children: list[py_trees.behaviour.Behaviour] = []
+    walks: list[tuple[int, Step]] = []  # (child index, step) of each walk
     steps = list(plan.steps)
     i = 0
     while i < len(steps):
@@ -60,6 +63,7 @@ def build_subtree(
             i += 3
             continue
         if step.kind == "step":  # a walk: one behaviour per footstep (KeyError: not planned)
+            walks.append((len(children), step))
             children.append(_walk(plan, step, guard))
         elif step.kind == "grasp":
             children.append(Grasp(step.name, step.side, step.obj))
@@ -68,7 +72,35 @@ def build_subtree(
         else:
             children.append(_motion(plan, steps, i, guard))
         i += 1
+    for at, walk in reversed(walks):  # from the last: the indices before stay valid
+        restance = _restance(plan, walk, children[at + 1 :])
+        if restance is not None:
+            children.insert(at + 1, restance)
     return py_trees.composites.Sequence(name=plan.name, memory=True, children=children)
+
+
+def _restance(
+    plan: AlternativePlan, walk: Step, after: list[py_trees.behaviour.Behaviour]
+) -> py_trees.behaviour.Behaviour | None:
+    """The behaviour that re-plans what follows ``walk`` from the measured stance
+    (:class:`behaviours.restance.Restance`); None when no hand moves after it before another walk.
+
+    Its movers are the behaviours among ``after`` that follow the rest's planned trajectories.
+    """
+    from behaviours.restance import Restance
+    from executive.planning.restance import rest_after
+
+    rest = rest_after(plan, walk.name)
+    if rest is None:
+        return None
+    by_trajectory = {id(t): name for name, t in rest.trajectories.items()}
+    movers = {}
+    for child in after:
+        for node in child.iterate():
+            name = by_trajectory.get(id(getattr(node, "trajectory", None)))
+            if name is not None:
+                movers[name] = node
+    return Restance(f"{walk.name}.restance", walk=walk.name, rest=rest, movers=movers)
 
 
 def _walk(plan: AlternativePlan, step: Step, guard: bool) -> py_trees.behaviour.Behaviour:

@@ -3,7 +3,10 @@
 :func:`run_campaign` runs N trials of every alternative of one task on sampled truths
 (trial ``i`` of every alternative on the same one), streams them to ``trials.jsonl`` in the
 run folder, and scores the predictions against the outcomes into ``summary.json``,
-``table.md`` and ``reliability.png``. ``resume`` completes a cut campaign. The parts:
+``table.md`` and ``reliability.png``. ``resume`` completes a cut campaign. With ``decide``
+each trial first decides as the executive does, on its own estimate (planning, analytic risk,
+dry runs, rollouts, fusion: :mod:`~executive.validation.campaign_decisions`), and the records
+carry the numbers it decided with and its choice. The parts:
 predictions (:mod:`~executive.validation.campaign_predictions`), trials
 (:mod:`~executive.validation.campaign_trials`), backends
 (:mod:`~executive.validation.campaign_backends`), the run folder
@@ -95,6 +98,7 @@ def run_campaign(
     task_index: int = 0,
     alternatives: Sequence[str] | None = None,
     stream: IO[str] | None = None,
+    decide: bool = False,
 ) -> CampaignResult:
     """Run (or complete) a campaign; write trials.jsonl, summary.json, table.md, reliability.png.
 
@@ -108,6 +112,8 @@ def run_campaign(
         seed: the first trial's seed (default: the scenario's ``trials.seed``).
         task_index, alternatives: the task, and which of its alternatives (default: all).
         stream: where progress goes (default stdout).
+        decide: each trial decides among the alternatives as the executive does, on its own
+            estimate (``risk.rollouts`` rollouts per alternative), before they are executed.
 
     Returns:
         The run folder, summary and records.
@@ -121,7 +127,7 @@ def run_campaign(
     base_seed = scenario.trials.seed if seed is None else seed
     folder = campaign_folder(scenario, out, resume)
     trials_path = folder / "trials.jsonl"
-    config = campaign_config(scenario, base_seed, task_index, names, n)
+    config = campaign_config(scenario, base_seed, task_index, names, n, decide)
     lock = claim_folder(folder, trials_path, config, resume)  # held until the summary is written
     records, duplicates, beyond = unique_trials(read_trials(trials_path, repair=True), n, names)
     done = {(r["trial"], r["alternative"]) for r in records}
@@ -134,13 +140,14 @@ def run_campaign(
     )
     _log_resumed(log, trials_path, len(records), len(specs), duplicates, beyond, n)
     _log_alone(log, scenario, task_index)
-    run = _execute(scenario, task_index, jobs, backend, folder, names, specs, records, log, stream)
+    run = _execute(scenario, task_index, jobs, backend, folder, names, specs, records, log, stream, decide)
     records.sort(
         key=lambda r: (r["trial"], names.index(r["alternative"]) if r["alternative"] in names else 0)
     )
     summary = summarise(scenario, records, names, run.predictions)
     summary.update(
         task=f"{task_index}: {task.label()}",
+        predictions=_predictions_text(scenario, decide),
         seed=base_seed,
         trials_per_alternative=n,
         complete=len(records) == n * len(names),
@@ -238,10 +245,11 @@ def _execute(
     records: list[dict[str, Any]],
     log: Callable[[str], Any],
     stream: IO[str] | None,
+    decide: bool = False,
 ) -> _Execution:
-    """Predict the alternatives (unless the scene varies) and run the trials ``specs``, each
-    appended to ``records`` and to trials.jsonl as it ends, with a progress bar. Ctrl-C stops
-    the workers; every finished trial is already on disk."""
+    """Predict the alternatives (unless the scene varies or each trial decides) and run the
+    trials ``specs``, each appended to ``records`` and to trials.jsonl as it ends, with a
+    progress bar. Ctrl-C stops the workers; every finished trial is already on disk."""
     from executive.report.progress_bar import ProgressBar
 
     t0 = time.perf_counter()
@@ -253,12 +261,15 @@ def _execute(
     predictions: dict[str, Prediction] = {}
     trial_phase = float("nan")
     try:
-        _predict(predictions, scenario, runner, names, log)
+        if decide:
+            log(_predictions_text(scenario, True))
+        else:
+            _predict(predictions, scenario, runner, names, log)
         t_trials = time.perf_counter()
         bar = ProgressBar(len(records) + len(specs), done=len(records), stream=stream)
         bar.draw(force=True)
         failures = sum(r["outcome"] != "success" for r in records)
-        for record in runner.trials(specs):
+        for record in runner.decisions(names, specs) if decide else runner.trials(specs):
             trial_log.write(record)
             records.append(record)
             new += 1
@@ -303,6 +314,23 @@ def _predict(
         predictions.update(checked)
     for name in predictions:
         log(f"  {name:<15} {prediction_text(predictions[name], scenario.risk.ordering)}")
+
+
+def _predictions_text(scenario: Scenario, decide: bool) -> str:
+    """Which predictions the campaign scores (the summary's ``predictions``, the table's title)."""
+    n = scenario.risk.rollouts.count
+    if decide:
+        fused = (
+            f"fused with {n} rollouts per alternative" if n else "analytic, after the dry runs (no rollouts)"
+        )
+        return (
+            "each trial's decision, on its own estimate as the executive makes it: planned, assessed, "
+            f"dry-run, {fused}"
+        )
+    if not scenario.trials.scene_variation.is_zero():
+        return "analytic, per trial on its own estimate"
+    fused = f", fused with up to {n} rollouts per alternative" if n else " (analytic, after the dry runs)"
+    return f"on the scenario's estimate, once per alternative{fused}"
 
 
 def _write_results(folder: Path, summary: dict[str, Any], records: list[dict[str, Any]]) -> None:

@@ -3,7 +3,9 @@
 :class:`Runner` runs them on a backend (:data:`Backend`): ``local`` is this process for one
 job, else a pool of ``jobs`` spawned processes; ``ray`` is Ray tasks (``pip install
 .[cluster]``) on the cluster at ``RAY_ADDRESS``, else on a local one with ``jobs`` CPUs.
-Trials come back in the order asked, whatever the backend.
+Trials come back in the order asked, whatever the backend. A campaign that decides per
+trial (``decide``) sends each worker a whole trial: its decision
+(:func:`~executive.validation.campaign_decisions.decide_trial`) and its alternatives executed.
 """
 
 from __future__ import annotations
@@ -13,11 +15,13 @@ import os
 import pickle
 import signal
 from collections.abc import Iterator, Sequence
+from itertools import groupby
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal
 
 from executive.errors import ExecutiveError
 from executive.schema.types import Scenario
+from executive.validation.campaign_decisions import decide_trial
 from executive.validation.campaign_predictions import Prediction, predict
 from executive.validation.campaign_trials import run_trial
 
@@ -52,6 +56,18 @@ def _trial_in_worker(spec: tuple[str | None, int, str, int]) -> dict[str, Any]:
         _WORKER["path"] = path
     prediction = _WORKER["predictions"].get(alternative) if path is not None else None
     return run_trial(_WORKER["scenario"], _WORKER["task_index"], alternative, index, seed, prediction)
+
+
+def _decision_in_worker(spec: tuple[tuple[str, ...], int, int, tuple[str, ...]]) -> list[dict[str, Any]]:
+    names, index, seed, run = spec
+    return decide_trial(_WORKER["scenario"], _WORKER["task_index"], names, index, seed, run)
+
+
+def _ray_decision(
+    scenario: Scenario, task_index: int, spec: tuple[tuple[str, ...], int, int, tuple[str, ...]]
+) -> list[dict[str, Any]]:
+    names, index, seed, run = spec
+    return decide_trial(scenario, task_index, names, index, seed, run)
 
 
 def _ray_predict(scenario: Scenario, task_index: int, alternative: str) -> Prediction:
@@ -114,6 +130,27 @@ class Runner:
             out = [_predict_in_worker(a) for a in alternatives]
         self._predictions = {p.alternative: p for p in out}
         return self._predictions
+
+    def decisions(
+        self, names: Sequence[str], specs: Sequence[tuple[int, str, int]]
+    ) -> Iterator[dict[str, Any]]:
+        """Decide each trial of ``specs`` among ``names`` and execute its alternatives of ``specs``
+        (a worker per trial); the records in the order of ``specs``."""
+        work = [
+            (tuple(names), index, seed, tuple(a for _, a, _ in group))
+            for (index, seed), group in ((k, list(g)) for k, g in groupby(specs, key=lambda s: (s[0], s[2])))
+        ]
+        if self._ray is not None:
+            remote = self._ray.remote(_ray_decision)
+            refs = [remote.remote(self.scenario, self.task_index, spec) for spec in work]
+            for ref in refs:
+                yield from self._ray.get(ref)
+        elif self._pool is not None:
+            for records in self._pool.imap(_decision_in_worker, work, chunksize=1):
+                yield from records
+        else:
+            for spec in work:
+                yield from _decision_in_worker(spec)
 
     def trials(self, specs: Sequence[tuple[int, str, int]]) -> Iterator[dict[str, Any]]:
         if self._ray is not None:

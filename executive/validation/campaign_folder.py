@@ -101,6 +101,20 @@ def _check_resume(folder: Path, config: dict[str, Any]) -> None:
     keys = ("scenario", "scenario_sha256", "seed", "task", "alternatives")
     how = "the same scenario, seed, task and alternatives"
     read_resume_settings(folder, "campaign.json", config, keys, "a campaign", how)
+    old = json.loads((folder / "campaign.json").read_text(encoding="utf-8"))
+    made = bool(old.get("decide", False))
+    if made != config["decide"]:
+        run, flag = ("decides per trial", "with") if made else ("predicts on the estimate", "without")
+        raise ExecutiveError(
+            f"--resume: the campaign in {folder} {run}; resume it {flag} --decide, "
+            "or start anew with another --out"
+        )
+    if made and old.get("rollouts") != config["rollouts"]:  # each decision's rollouts
+        raise ExecutiveError(
+            f"--resume: the campaign in {folder} decided with {old.get('rollouts')} rollouts per "
+            f"alternative; this run asks for {config['rollouts']}. Resume with the same, or start anew "
+            "with another --out"
+        )
 
 
 def unique_trials(
@@ -164,9 +178,10 @@ def _write_config(folder: Path, config: dict[str, Any]) -> None:
 
 
 def campaign_config(
-    scenario: Scenario, base_seed: int, task_index: int, names: list[str], n: int
+    scenario: Scenario, base_seed: int, task_index: int, names: list[str], n: int, decide: bool = False
 ) -> dict[str, Any]:
-    """What campaign.json records: the scenario (and its SHA-256), seed, task, alternatives, trials."""
+    """What campaign.json records: the scenario (and its SHA-256), seed, task, alternatives,
+    trials, and whether each trial decides as the executive does (``decide``)."""
     return {
         "scenario": scenario.name,
         "source": str(scenario.source) if scenario.source else None,
@@ -175,6 +190,8 @@ def campaign_config(
         "task": task_index,
         "alternatives": names,
         "trials": n,
+        "decide": decide,
+        "rollouts": scenario.risk.rollouts.count,
     }
 
 

@@ -17,8 +17,9 @@ from executive.schema.types import Scenario
 
 if TYPE_CHECKING:
     from executive.decision.physics_check import RolloutJob
+    from executive.risk.combine import CombinedRisk
 
-__all__ = ["Prediction", "check_predictions", "predict", "prediction_text"]
+__all__ = ["Prediction", "check_predictions", "predict", "prediction_text", "risk_fields"]
 
 
 @dataclass(frozen=True)
@@ -40,7 +41,7 @@ def predict(scenario: Scenario, task_index: int, alternative: str) -> Prediction
     """Plan ``alternative`` on the estimate and assess its risk (as ``executive plan`` does)."""
     from executive.decision.assessment import assess_plan
     from executive.planning.planner import Planner, PlanningError
-    from executive.risk.collision import CollisionModel, breach_summary
+    from executive.risk.collision import CollisionModel
     from executive.tasks.steps import plan_alternative
     from executive.world.model import build
 
@@ -52,11 +53,22 @@ def predict(scenario: Scenario, task_index: int, alternative: str) -> Prediction
         return Prediction(alternative, False, None, None, str(exc))
     model = CollisionModel(world, scenario.risk, uncertainty=scenario.uncertainty)
     risk = assess_plan(world, plan, model)
-    risk_dict = risk.as_dict()
+    return Prediction(
+        alternative, True, risk_fields(risk), risk.value(scenario.risk.ordering), "", plan, risk
+    )
+
+
+def risk_fields(risk: CombinedRisk) -> dict[str, float]:
+    """A risk report as a record has it: each failure mode's probability, the combined ones
+    (:meth:`~executive.risk.combine.CombinedRisk.as_dict`) and, when the scene has a breach
+    obstacle, P(touching one) as ``breach`` (a part of the collision mode)."""
+    from executive.risk.collision import breach_summary
+
+    out = risk.as_dict()
     breach = breach_summary(risk.components["collision"]) if "collision" in risk.components else None
-    if breach is not None:  # P(touching a breach obstacle), a part of the collision mode
-        risk_dict["breach"] = float(breach["probability"])
-    return Prediction(alternative, True, risk_dict, risk.value(scenario.risk.ordering), "", plan, risk)
+    if breach is not None:
+        out["breach"] = float(breach["probability"])
+    return out
 
 
 def check_predictions(

@@ -3,8 +3,11 @@
 :func:`summarise` gives, per alternative, the trials, the failures by verdict, the failure
 rates with 95% Clopper-Pearson intervals and the mean predicted risk; and overall, per
 failure mode (and "any"), the ROC AUC, Brier score and ECE of its predictor
-(:func:`forecasts`) and Spearman's rank correlation across the alternatives. The failure
-modes and verdicts come from :mod:`executive.schema.failure_modes`.
+(:func:`forecasts`) and Spearman's rank correlation across the alternatives, and the regret of
+the per-trial choice (:mod:`executive.validation.regret`). A campaign that decides per trial
+(``--decide``) also gets its fused and its analytic predictions scored on the same trials
+(:func:`decision_scores`). The failure modes and verdicts come from
+:mod:`executive.schema.failure_modes`.
 """
 
 from __future__ import annotations
@@ -23,12 +26,17 @@ if TYPE_CHECKING:
     from executive.validation.campaign_predictions import Prediction
 
 __all__ = [
+    "analytic_view",
+    "choice_regrets",
+    "decision_scores",
     "executed_trials",
     "finite",
     "forecasts",
     "group_rates",
     "observed_outcomes",
+    "pooled_statistics",
     "reliability_curves",
+    "scored_trials",
     "summarise",
 ]
 
@@ -51,6 +59,80 @@ def _forecasts_by_mode() -> dict[str, str]:
 def executed_trials(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     """The trials that ran in physics (not infeasible, not failed by a defect)."""
     return [r for r in records if r["outcome"] not in ("infeasible", "error")]
+
+
+def scored_trials(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The trials whose predictions are scored: those executed in physics; of a campaign that
+    decides per trial, those whose dry run passed (the executive never runs the others; their
+    numbers are analytic, and they are executed and counted all the same)."""
+    return [
+        r for r in executed_trials(records) if (r.get("physics") or {}).get("dry_run", "success") == "success"
+    ]
+
+
+def analytic_view(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """The records as the analytic models alone predicted them (before the rollouts were fused),
+    without the recorded decision (the choice is then the lowest analytic value's).
+
+    Records without rollouts are their own analytic view.
+    """
+    out = []
+    for r in records:
+        predicted = r.get("predicted") or {}
+        analytic = predicted.get("analytic")
+        view = {k: v for k, v in r.items() if k != "decision"}
+        out.append({**view, "predicted": analytic} if analytic is not None else view)
+    return out
+
+
+def pooled_statistics(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per failure mode, over the scored trials (:func:`scored_trials`): events, ROC AUC, the
+    best AUC of a prediction constant per alternative (and variant), Brier, ECE."""
+    from executive.validation.stats import brier, expected_calibration_error, roc_auc
+
+    scored = scored_trials(records)
+    groups = [(r.get("variant"), r["alternative"]) for r in scored]
+    out = {}
+    for mode, key, p, y in forecasts(scored):
+        out[mode] = {
+            "predicted_by": key,
+            "trials": len(y),
+            "events": int(y.sum()),
+            "auc": finite(roc_auc(p, y)),
+            "auc_ceiling": finite(roc_auc(group_rates(groups, y), y)),
+            "brier": finite(brier(p, y)),
+            "ece": finite(expected_calibration_error(p, y)),
+        }
+    return out
+
+
+def choice_regrets(records: Sequence[dict[str, Any]], alternatives: Sequence[str]) -> dict[str, Any]:
+    """The cross-fitted regret of the per-trial choice (:mod:`executive.validation.regret`): the
+    recorded decision's, else the lowest predicted value's; and, when rollouts were fused,
+    ``analytic``: the choice by the analytic value alone on the same truths (else None)."""
+    from executive.validation.regret import regret, trial_table
+
+    fused = any(isinstance(r.get("predicted"), dict) and "analytic" in r["predicted"] for r in records)
+    analytic = regret(trial_table(analytic_view(records), alternatives)).as_dict() if fused else None
+    return {"choice": regret(trial_table(records, alternatives)).as_dict(), "analytic": analytic}
+
+
+def decision_scores(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
+    """A campaign that decides per trial: the fused and the analytic predictions scored on the
+    same trials (:func:`scored_trials`), the trials left out because their dry run failed, and
+    how many decisions chose an alternative above the threshold (the executive asks first)."""
+    decided = [r for r in records if isinstance(r.get("decision"), dict)]
+    above = {r["trial"] for r in decided if r["decision"].get("above_threshold")}
+    return {
+        "trials": len(scored_trials(records)),
+        "dry_run_failed": sum(
+            (r.get("physics") or {}).get("dry_run", "success") != "success" for r in executed_trials(records)
+        ),
+        "decisions": len({r["trial"] for r in decided}),
+        "above_threshold": len(above),
+        "fused": pooled_statistics(records),
+        "analytic": pooled_statistics(analytic_view(records)),
+    }
 
 
 def forecasts(executed: Sequence[dict[str, Any]]) -> Iterator[tuple[str, str, FloatArray, BoolArray]]:
@@ -102,7 +184,9 @@ def summarise(
     predictions: dict[str, Prediction],
 ) -> dict[str, Any]:
     """Per alternative: trials, failures by mode, failure rates with 95% Clopper-Pearson
-    intervals, mean predicted risk; overall: AUC, Brier and ECE per mode and Spearman."""
+    intervals, mean predicted risk; overall: AUC, Brier and ECE per mode over the scored trials
+    (:func:`scored_trials`), Spearman, the regret of the per-trial choice (:func:`choice_regrets`)
+    and, for a campaign that decides per trial, :func:`decision_scores`."""
     from executive.validation.stats import spearman
 
     executed = executed_trials(records)
@@ -114,17 +198,19 @@ def summarise(
     breach = sorted(o.name for o in scenario.scene.obstacles if o.category == "breach")
     for a in per_alt if breach else ():
         a["breach"] = _breach_touches([r for r in executed if r["alternative"] == a["name"]], set(breach))
-    observed_by, auc, ceiling, brier_by, ece_by = _forecast_scores(executed)
+    observed_by, auc, ceiling, brier_by, ece_by = _forecast_scores(scored_trials(records))
     ran = [a for a in per_alt if a["trials"]]
     rho = {
         q: finite(spearman([a["predicted"][q] for a in ran], [a["failure_rate"]["value"] for a in ran]))
         for q in ("combined", ordering)
     }
+    decided = any(isinstance(r.get("decision"), dict) for r in records)
     return {
         "scenario": scenario.name,
         "task": None,
         "ordering": ordering,
         "trials_executed": len(executed),
+        "trials_scored": len(scored_trials(records)),
         "alternatives": per_alt,
         "observed_failures": observed_by,
         "auc": auc,
@@ -135,6 +221,8 @@ def summarise(
         "spearman_by": rho,
         "predictor": _forecasts_by_mode(),
         "breach_obstacles": breach,
+        "regret": choice_regrets(records, alternatives),
+        "decision": decision_scores(records) if decided else None,
     }
 
 

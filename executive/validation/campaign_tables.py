@@ -2,9 +2,10 @@
 
 :func:`table_text` (what ``executive campaign`` prints) and :func:`table_markdown`
 (``table.md``) show, per alternative, each failure mode's predicted probability and each
-verdict's observed rate with the failures' 95% interval, then the scores per failure mode;
-their columns come from the failure-mode table. :func:`reliability_figure` draws
-``reliability.png``.
+verdict's observed rate with the failures' 95% interval, then the scores per failure mode,
+the fused and the analytic scores side by side for a campaign that decided per trial, and the
+regret of the per-trial choice; their columns come from the failure-mode table.
+:func:`reliability_figure` draws ``reliability.png``.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from executive.schema.failure_modes import failure_mode, failure_modes, mode_names, mode_of_verdict, outcome
-from executive.validation.campaign_scoring import executed_trials, observed_outcomes, reliability_curves
+from executive.validation.campaign_scoring import observed_outcomes, reliability_curves, scored_trials
 
 __all__ = ["reliability_figure", "table_markdown", "table_text"]
 
@@ -99,7 +100,7 @@ def _text_row(cells: Sequence[str]) -> str:
 def table_text(summary: dict[str, Any]) -> str:
     """Predicted risk and observed failures per alternative, then the scores per failure mode."""
     lines = [
-        "predicted (on the estimate)  vs  observed (detectors, in physics)",
+        f"predicted ({summary.get('predictions', 'on the estimate')})  vs  observed (detectors, in physics)",
         _text_row([c[0] for c in _columns()]),
     ]
     lines += [_text_row(_cells(a)) for a in summary["alternatives"]]
@@ -118,7 +119,57 @@ def table_text(summary: dict[str, Any]) -> str:
         f"Spearman (predicted {summary['ordering']} vs observed failure rate, per alternative): "
         f"{_num(summary['spearman'], '.2f')}"
     )
-    return "\n".join(lines + _breach_lines(summary))
+    return "\n".join(lines + _breach_lines(summary) + _decision_lines(summary) + _regret_lines(summary))
+
+
+def _decision_lines(summary: dict[str, Any]) -> list[str]:
+    """A campaign that decides per trial: the fused and the analytic predictions, per failure
+    mode, on the same trials (events, ROC AUC, ECE, Brier)."""
+    d = summary.get("decision")
+    if not d:
+        return []
+    lines = [
+        f"fused vs analytic on the same {d['trials']} trials ({d['decisions']} decisions; "
+        f"{d['dry_run_failed']} executed trials left out: their dry run failed; "
+        f"{d['above_threshold']} decisions chose above the threshold):",
+        f"{'mode':<10}{'events':>7}   AUC fused  analytic   ECE fused  analytic   Brier fused  analytic",
+    ]
+    for mode, f in d["fused"].items():
+        a = d["analytic"][mode]
+        lines.append(
+            f"{mode:<10}{f['events']:>7}   {_num(f['auc']):>9} {_num(a['auc']):>9}"
+            f"   {_num(f['ece'], '.4f'):>9} {_num(a['ece'], '.4f'):>9}"
+            f"   {_num(f['brier'], '.4f'):>11} {_num(a['brier'], '.4f'):>9}"
+        )
+    return lines
+
+
+def _regret_lines(summary: dict[str, Any]) -> list[str]:
+    """The regret of the per-trial choice (and of the analytic models' choice, when rollouts were fused)."""
+    regrets = summary.get("regret") or {}
+    decided = bool(summary.get("decision"))
+    labels = {
+        "choice": "the executive's choice per trial"
+        if decided
+        else "choosing per trial by the predicted value",
+        "analytic": "choosing by the analytic value alone",
+    }
+    lines = []
+    for key, label in labels.items():
+        r = regrets.get(key)
+        if not r:
+            continue
+        if r["regret"] is None:
+            lines.append(f"regret of {label}: none ({r['trials']} comparable trials)")
+            continue
+        low, high = r["ci95"]
+        chosen = ", ".join(f"{a} {n}" for a, n in r["chosen"].items() if n)
+        lines.append(
+            f"regret of {label}: {r['regret']:+.3f} [{low:+.2f}, {high:+.2f}], p {r['p_value']:.2f} "
+            f"(cross-fitted; failed {r['choice_failures']} vs best fixed {r['best_failures']} of "
+            f"{r['trials']}; chosen {chosen})"
+        )
+    return lines
 
 
 def table_markdown(summary: dict[str, Any]) -> str:
@@ -152,7 +203,35 @@ def table_markdown(summary: dict[str, Any]) -> str:
     breach = _breach_lines(summary)
     if breach:
         rows += ["", breach[0], ""] + [f"- {line.strip()}" for line in breach[1:]]
+    rows += ["", f"Predictions: {summary.get('predictions', 'on the estimate')}."]
+    rows += _decision_markdown(summary)
+    rows += ["", *(f"- {line}" for line in _regret_lines(summary))]
     return "\n".join(rows)
+
+
+def _decision_markdown(summary: dict[str, Any]) -> list[str]:
+    """:func:`_decision_lines` as a markdown table."""
+    d = summary.get("decision")
+    if not d:
+        return []
+    rows = [
+        "",
+        f"Fused vs analytic predictions on the same {d['trials']} trials ({d['decisions']} decisions; "
+        f"{d['dry_run_failed']} executed trials left out: their dry run failed; {d['above_threshold']} "
+        "decisions chose above the threshold):",
+        "",
+        "| failure mode | events | ROC AUC fused | ROC AUC analytic | AUC ceiling | ECE fused | ECE analytic "
+        "| Brier fused | Brier analytic |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for mode, f in d["fused"].items():
+        a = d["analytic"][mode]
+        rows.append(
+            f"| {mode} | {f['events']} | {_num(f['auc'])} | {_num(a['auc'])} | {_num(f['auc_ceiling'])} "
+            f"| {_num(f['ece'], '.4f')} | {_num(a['ece'], '.4f')} | {_num(f['brier'], '.4f')} "
+            f"| {_num(a['brier'], '.4f')} |"
+        )
+    return rows
 
 
 def reliability_figure(records: Sequence[dict[str, Any]], path: Path) -> Path:
@@ -161,5 +240,5 @@ def reliability_figure(records: Sequence[dict[str, Any]], path: Path) -> Path:
     from executive.decision.audit import atomic_replace
     from executive.validation.stats import reliability_diagram
 
-    curves = reliability_curves(executed_trials(records))
+    curves = reliability_curves(scored_trials(records))
     return atomic_replace(path, lambda tmp: reliability_diagram(curves, tmp))

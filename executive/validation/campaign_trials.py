@@ -14,11 +14,12 @@ from typing import Any
 
 import numpy as np
 
+from executive.planning.restance import LocalReplanner
 from executive.schema.types import Scenario, SceneVariation
 from executive.validation.campaign_predictions import Prediction, predict
 from executive.world.model import Perturbation
 
-__all__ = ["run_trial", "trial_scene", "trial_seed", "vary_scene"]
+__all__ = ["execute_trial", "run_trial", "trial_record", "trial_scene", "trial_seed", "vary_scene"]
 
 
 def trial_seed(base_seed: int, index: int) -> int:
@@ -103,19 +104,41 @@ def run_trial(
     ``fall``, ``drop``, ``unstable``, or a verdict no mode predicts (``tracking``, ``task``,
     ``timeout``: not finished in the time limit; :mod:`executive.schema.failure_modes`);
     ``infeasible`` when the alternative does not plan (nothing is executed) and ``error`` when
-    the trial's code raised (a defect; counted, never hidden).
+    the trial's code raised (a defect; counted, never hidden). What follows a walk inside the
+    plan is re-planned from the stance the robot measures (its odometry seeded by the trial),
+    its risk checked as a mission would (:func:`_replanner`); the record's ``restance`` says how.
 
     ``prediction``: the alternative planned on the scenario's fixed estimate, once per
     alternative (planning is deterministic: planning again per trial gives the same plan);
     None: plan it here, on the trial's own scene, as a scenario with a scene variation needs.
     """
-    from executive.execution.runner import error_fields, execute_plan, outcome_fields
-    from executive.world.model import build
-
     estimate, perturbation, shifts = trial_scene(scenario, seed)
     if prediction is None or shifts is not None:
         prediction = predict(estimate, task_index, alternative)
-    record: dict[str, Any] = {
+    record = trial_record(index, alternative, seed, _predicted(prediction), shifts, perturbation)
+    if not prediction.feasible:
+        record["failure"] = {"mode": "infeasible", "detail": prediction.error}
+        return record
+    return execute_trial(record, prediction.plan, estimate, perturbation, task_index, prediction.value)
+
+
+def trial_record(
+    index: int,
+    alternative: str,
+    seed: int,
+    predicted: dict[str, Any] | None,
+    shifts: dict[str, Any] | None,
+    perturbation: Perturbation,
+) -> dict[str, Any]:
+    """A trial's record before it runs: outcome ``infeasible`` until :func:`execute_trial` runs it.
+
+    Args:
+        index, alternative, seed: which trial.
+        predicted: its predicted risk (per-mode probabilities, ``value``; None: it did not plan).
+        shifts: the trial's scene variation (None: the scenario's scene).
+        perturbation: the truth's perturbation.
+    """
+    return {
         "trial": index,
         "alternative": alternative,
         "seed": seed,
@@ -123,21 +146,61 @@ def run_trial(
         "failure": None,
         "placement_error_m": None,
         "sim_time_s": 0.0,
-        "predicted": _predicted(prediction),
+        "predicted": predicted,
         "scene": shifts,
         "truth": _perturbation_json(asdict(perturbation)),
     }
-    if not prediction.feasible:
-        record["failure"] = {"mode": "infeasible", "detail": prediction.error}
-        return record
+
+
+def execute_trial(
+    record: dict[str, Any],
+    plan: Any,
+    estimate: Scenario,
+    perturbation: Perturbation,
+    task_index: int,
+    value: float | None = None,
+) -> dict[str, Any]:
+    """``record`` with the outcome of ``plan`` executed in physics on the truth of ``perturbation``.
+
+    The alternative is forced: no selection, no approval, no live guards. A trial whose code
+    raises records outcome ``error`` (a defect; counted, never hidden).
+
+    Args:
+        record: the trial's record (:func:`trial_record`), updated and returned.
+        plan: the alternative's plan (an :class:`~executive.planning.plan.AlternativePlan`).
+        estimate: the trial's estimate (the truth is built from it and ``perturbation``).
+        perturbation: the truth's perturbation.
+        task_index: the task of ``estimate``'s mission the plan does.
+        value: the alternative's predicted value, the bound a re-plan after a walk is checked
+            against (:func:`_replanner`); None: not checked.
+    """
+    from executive.execution.runner import error_fields, execute_plan, outcome_fields
+    from executive.world.model import build
+
     try:
         truth = build(estimate, perturbation, kind="truth")
-        result = execute_plan(prediction.plan, truth, estimate.mission[task_index])
+        replanner = _replanner(estimate, value)
+        result = execute_plan(
+            plan, truth, estimate.mission[task_index], replanner=replanner, seed=record["seed"]
+        )
     except Exception as exc:  # a defect in a trial must not end the campaign; it is counted
         record.update(error_fields(exc))
         return record
     record.update(outcome_fields(result))
     return record
+
+
+def _replanner(estimate: Scenario, value: float | None) -> LocalReplanner:
+    """What follows a walk inside the plan is re-planned from the measured stance on the trial's
+    estimate, its risk checked as a mission checks it: against the prediction's value, approved
+    (forced) at that value or the threshold if higher."""
+    from executive.decision.restance import Approval, RiskRecheck
+
+    risk = estimate.risk
+    if value is None:
+        return LocalReplanner(estimate)
+    approval = Approval.of(value, risk.threshold, risk.ordering)
+    return LocalReplanner(estimate, check=RiskRecheck(approval))
 
 
 def _predicted(prediction: Prediction) -> dict[str, Any] | None:

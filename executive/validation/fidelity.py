@@ -40,10 +40,10 @@ from executive.decision.audit import atomic_write_text, read_resume_settings
 from executive.errors import ExecutiveError
 from executive.schema.types import Scenario
 from executive.validation.campaign_scoring import (
+    analytic_view,
     executed_trials,
     finite,
-    forecasts,
-    group_rates,
+    pooled_statistics,
     reliability_curves,
 )
 
@@ -93,8 +93,8 @@ def _prepare(folder: Path, config: dict[str, Any], resume: bool) -> None:
     """Write (or, with ``resume``, check) the suite's ``suite.json``."""
     path = folder / "suite.json"
     if resume:
-        keys = ("scenario", "scenario_sha256", "seed", "rollouts")
-        how = "the same scenario, --seed and --rollouts"
+        keys = ("scenario", "scenario_sha256", "seed", "rollouts", *(("decide",) if config["decide"] else ()))
+        how = "the same scenario, --seed, --rollouts and --decide"
         read_resume_settings(folder, "suite.json", config, keys, "a fidelity suite", how)
     elif path.is_file():
         raise ExecutiveError(
@@ -112,9 +112,10 @@ def run_fidelity(
     jobs: int = 1,
     out: Path | str | None = None,
     seed: int | None = None,
-    rollouts: int = 0,
+    rollouts: int | None = None,
     resume: bool = False,
     stream: IO[str] | None = None,
+    decide: bool = False,
 ) -> FidelityResult:
     """Run (or, with ``resume``, complete) a fidelity suite of ``scenario``.
 
@@ -125,9 +126,12 @@ def run_fidelity(
         jobs: worker processes of each campaign.
         out: the suite folder (default ``runs/<stamp>-<scenario>-fidelity``).
         seed: seed of the variants' generators (default: the scenario's ``trials.seed``).
-        rollouts: ``risk.rollouts.count`` of every variant (0: off).
+        rollouts: ``risk.rollouts.count`` of every variant (0: off; None: the scenario's when
+            deciding, else 0).
         resume: complete the suite in ``out``.
         stream: where progress goes (default stdout).
+        decide: every campaign decides per trial as the executive does
+            (:func:`executive.validation.campaign.run_campaign`'s ``decide``).
 
     Returns:
         The suite's folder and summary (also in ``summary.json``).
@@ -142,6 +146,8 @@ def run_fidelity(
     for name, value, least in (("--variants", variants, 1), ("--trials", trials, 1), ("--jobs", jobs, 1)):
         if value < least:
             raise ExecutiveError(f"{name} must be at least {least}; got {value}")
+    if rollouts is None:
+        rollouts = scenario.risk.rollouts.count if decide else 0
     if rollouts < 0:
         raise ExecutiveError(f"--rollouts must be 0 (off) or more; got {rollouts}")
     if out is None and resume:
@@ -154,6 +160,7 @@ def run_fidelity(
         "scenario_sha256": _sha256(scenario.source),
         "seed": base_seed,
         "rollouts": rollouts,
+        "decide": decide,
         "variants": variants,
         "trials": trials,
     }
@@ -164,7 +171,7 @@ def run_fidelity(
     log(
         f"fidelity {scenario.name}: {variants} variant(s) x {trials} trial(s) x {len(task.alternatives)} "
         f"alternatives ({', '.join(task.alternatives)}), seed {base_seed}, rollouts "
-        f"{rollouts or 'off'}, {jobs} job(s); suite folder {folder}"
+        f"{rollouts or 'off'}{', each trial decides' if decide else ''}, {jobs} job(s); suite folder {folder}"
     )
     return _run_variants(scenario, document, folder, config, jobs, log)
 
@@ -214,6 +221,7 @@ def _run_variants(
                 out=sub,
                 resume=(sub / "campaign.json").is_file(),
                 stream=campaign_stream,
+                decide=config["decide"],
             )
         new_trials += result.new_trials
         campaign_s += result.elapsed_s
@@ -333,39 +341,6 @@ def _commonest_reason(records: Sequence[dict[str, Any]], alternative: str) -> st
     shapes = Counter(re.sub(r"[-+]?\d[\d.e-]*", "#", d) for d in details)
     commonest = shapes.most_common(1)[0][0]
     return next(d for d in details if re.sub(r"[-+]?\d[\d.e-]*", "#", d) == commonest)
-
-
-def analytic_view(records: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
-    """The records as the analytic models alone predicted them (before the rollouts were fused).
-
-    Records without rollouts are their own analytic view.
-    """
-    out = []
-    for r in records:
-        predicted = r.get("predicted") or {}
-        analytic = predicted.get("analytic")
-        out.append({**r, "predicted": analytic} if analytic is not None else r)
-    return out
-
-
-def pooled_statistics(records: Sequence[dict[str, Any]]) -> dict[str, dict[str, Any]]:
-    """Per failure mode, over every trial executed in physics: events, ROC AUC, Brier, ECE."""
-    from executive.validation.stats import brier, expected_calibration_error, roc_auc
-
-    executed = executed_trials(records)
-    groups = [(r.get("variant"), r["alternative"]) for r in executed]
-    out = {}
-    for mode, key, p, y in forecasts(executed):
-        out[mode] = {
-            "predicted_by": key,
-            "trials": len(y),
-            "events": int(y.sum()),
-            "auc": finite(roc_auc(p, y)),
-            "auc_ceiling": finite(roc_auc(group_rates(groups, y), y)),
-            "brier": finite(brier(p, y)),
-            "ece": finite(expected_calibration_error(p, y)),
-        }
-    return out
 
 
 def _regret_overall(rows: Sequence[dict[str, Any]]) -> dict[str, Any]:
@@ -524,6 +499,12 @@ def _rows(summary: dict[str, Any]) -> tuple[list[str], list[list[str]]]:
 
 def _footer(summary: dict[str, Any]) -> list[str]:
     lines = _regret_lines(summary["regret"], "")
+    if summary.get("decide"):
+        lines.insert(
+            0,
+            "each trial decided as the executive does, on its own estimate: the choice is the "
+            "decision's, the pooled scores those of its numbers (trials whose dry run passed)",
+        )
     if summary.get("rollouts"):
         lines += _regret_lines(summary["analytic"]["regret"], "analytic models alone (no rollouts): ")
     return [

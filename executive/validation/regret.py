@@ -1,7 +1,9 @@
 """Regret of the risk ranking: does choosing per trial beat the best fixed alternative?
 
 In trial ``t`` the executive would run the alternative with the lowest predicted value
-(the selector's number; infeasible alternatives are never chosen). Its regret is the
+(the selector's number; infeasible alternatives are never chosen); a campaign that ran the
+executive's decision per trial (``--decide``) records the alternative it chose, and that is
+the choice scored (none chosen: the task is not done, a failure). Its regret is the
 failure rate of those choices minus that of the best *fixed* alternative on the same
 truths (a campaign's common random numbers): negative when the per-trial ranking
 helps, zero when it does as well as always running the best one, positive when it
@@ -68,7 +70,9 @@ class TrialTable:
     ``failed``: the outcome was not ``success`` (``infeasible`` included); ``value``: the
     predicted value the selector ranks by, ``inf`` when infeasible; ``trials``: the trials'
     indices; ``dropped``: trials left out, by reason (``incomplete``, ``error``,
-    ``all_infeasible``).
+    ``all_infeasible``); ``chosen``: the column the executive's recorded decision chose per
+    trial (-1: none), None when the records carry no decision (the choice is then the lowest
+    value's, :func:`choices`).
     """
 
     alternatives: tuple[str, ...]
@@ -76,6 +80,7 @@ class TrialTable:
     failed: BoolArray
     value: FloatArray
     dropped: dict[str, int] = field(default_factory=dict)
+    chosen: IntArray | None = None
 
 
 def trial_table(records: Sequence[dict[str, Any]], alternatives: Sequence[str]) -> TrialTable:
@@ -84,7 +89,7 @@ def trial_table(records: Sequence[dict[str, Any]], alternatives: Sequence[str]) 
     for record in records:
         by_trial.setdefault(int(record["trial"]), {})[record["alternative"]] = record
     dropped = {"incomplete": 0, "error": 0, "all_infeasible": 0}
-    rows, failed, value = [], [], []
+    rows, failed, value, chosen = [], [], [], []
     for t in sorted(by_trial):
         row = by_trial[t]
         if any(a not in row for a in alternatives):
@@ -101,6 +106,7 @@ def trial_table(records: Sequence[dict[str, Any]], alternatives: Sequence[str]) 
         rows.append(t)
         failed.append([r["outcome"] != "success" for r in mine])
         value.append([_value(r) if ok else math.inf for r, ok in zip(mine, feasible, strict=True)])
+        chosen.append(_decided(mine[0], alternatives))
     n_alt = len(alternatives)
     return TrialTable(
         tuple(alternatives),
@@ -108,7 +114,19 @@ def trial_table(records: Sequence[dict[str, Any]], alternatives: Sequence[str]) 
         np.asarray(failed, dtype=bool).reshape(-1, n_alt),
         np.asarray(value, dtype=float).reshape(-1, n_alt),
         dropped,
+        np.asarray(chosen, dtype=np.intp) if rows and None not in chosen else None,
     )
+
+
+def _decided(record: dict[str, Any], alternatives: Sequence[str]) -> int | None:
+    """The column of the alternative the trial's recorded decision chose (-1: none; None: the
+    record carries no decision)."""
+    decision = record.get("decision")
+    if not isinstance(decision, dict):
+        return None
+    chosen = decision.get("chosen")
+    names = list(alternatives)
+    return names.index(chosen) if isinstance(chosen, str) and chosen in names else -1
 
 
 def _value(record: dict[str, Any]) -> float:
@@ -228,9 +246,11 @@ def regret(table: TrialTable) -> Regret:
     """The cross-fitted regret of the per-trial choice, its interval and paired test."""
     n = table.failed.shape[0]
     rows = np.arange(n)
-    chosen = choices(table.value)
-    choice_failed = table.failed[rows, chosen]
+    chosen = choices(table.value) if table.chosen is None else table.chosen
+    choice_failed = np.where(chosen >= 0, table.failed[rows, np.maximum(chosen, 0)], True)  # none: failed
     counts = {a: int((chosen == i).sum()) for i, a in enumerate(table.alternatives)}
+    if (chosen < 0).any():
+        counts["(none)"] = int((chosen < 0).sum())
     best, names = cross_fitted_best(table)
     naive = None
     if n:

@@ -32,6 +32,7 @@ from executive.robot.profile import load_profile
 from executive.robot.profile_types import RobotProfile
 from executive.schema.types import Body, Scenario
 from executive.world import model_cache
+from executive.world.heading import yaw_quat
 
 __all__ = [
     "Grip",
@@ -204,17 +205,26 @@ class World:
         model.body_ipos[torso, :2] -= (dx * scale, dy * scale)  # undoes _shift_torso_com
         return model
 
-    @property
-    def base_qpos(self) -> slice:
-        """The robot's floating base in ``qpos`` (position, then quaternion w x y z)."""
+    def _base_joint(self) -> int:
+        """The robot's floating base joint."""
         model = self.model
-        joint = next(
+        return next(
             j
             for j in range(model.njnt)
             if model.jnt_bodyid[j] == self.ids.base_body and model.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE
         )
-        adr = int(model.jnt_qposadr[joint])
+
+    @property
+    def base_qpos(self) -> slice:
+        """The robot's floating base in ``qpos`` (position, then quaternion w x y z)."""
+        adr = int(self.model.jnt_qposadr[self._base_joint()])
         return slice(adr, adr + 7)
+
+    @property
+    def base_qvel(self) -> slice:
+        """The robot's floating base in ``qvel`` (linear velocity in the world frame, then angular)."""
+        adr = int(self.model.jnt_dofadr[self._base_joint()])
+        return slice(adr, adr + 6)
 
     @property
     def robot_dof(self) -> int:
@@ -426,7 +436,7 @@ def _add_table(spec: mujoco.MjSpec, scenario: Scenario, friction_scale: float) -
     body = spec.worldbody.add_body(
         name="table",
         pos=[table.position[0], table.position[1], 0.0],
-        quat=_yaw_quat(table.yaw_rad).tolist(),
+        quat=yaw_quat(table.yaw_rad).tolist(),
     )
     names = ["table_top"]
     body.add_geom(
@@ -489,10 +499,6 @@ def _add_obstacle(spec: mujoco.MjSpec, body: Body, pos: list[float], quat: list[
         rgba=list(body.rgba or _OBSTACLE_RGBA),
         **_geom_kwargs(body),
     )
-
-
-def _yaw_quat(yaw: float) -> FloatArray:
-    return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
 
 
 def _rpy_quat(roll: float, pitch: float, yaw: float) -> FloatArray:
