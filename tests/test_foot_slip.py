@@ -4,7 +4,7 @@ Every slip here is made by MuJoCo: the floor's friction lowered (the floor's geo
 contact's friction by its priority) under a robot pushed or walking. The references are the
 physics itself: the foot body's displacement and turn since it started standing, its speed by
 finite differences, the contact points of a foot rolled onto its edge. Numbers are printed
-(pytest -s) and recorded in docs/detectors.md ("Foot slip") and docs/stepping.md.
+(pytest -s -n 0) and recorded in docs/detectors.md ("Foot slip") and docs/stepping.md.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@ The references are physics and the fall model's own polygon: the guard must trip
 state whose CoM margin over the measured foot contacts (``support_polygon(from_contacts=True)``
 of the fall model; no polygon on one foot counts as outside) is under its limit, never on a
 normal step or walk at exact truth, and after a trip the robot must stand on both feet where the
-same push without the guard (or with another hold) makes it fall. Numbers are printed (pytest -s)
+same push without the guard (or with another hold) makes it fall. Numbers are printed (pytest -s -n 0)
 and recorded in docs/stepping.md and docs/live_guards.md.
 """
 
