@@ -43,10 +43,10 @@ import py_trees
 from behaviours.robot_access import RobotBehaviour
 from executive.planning.limits import SupportPolygon
 from executive.planning.stepping import Foothold, StepPhase, StepPlan
-from executive.planning.stepping_geometry import yaw_of
 from executive.planning.stepping_hold import back_to_both_feet, on_to_both_feet, single_support_left
 from executive.planning.timing import Trajectory, concatenate
 from executive.schema.types import GuardConfig
+from executive.world.heading import yaw_of
 
 __all__ = ["HELD_VERDICTS", "HOLDS", "Step", "foot_force", "foothold", "sole_gap"]
 

@@ -21,6 +21,27 @@ G1_DIR = REPO.parent / "shared" / "robots" / "unitree_g1"
 G1_MJCF = G1_DIR / "g1_with_hands.xml"
 
 
+def g1_floor_yaml(mjcf: Path, com: float | None = None) -> str:
+    """The Unitree G1 on open floor, a table with a book behind it (out of its walks' way).
+
+    ``com``: the scenario's ``uncertainty.com`` (m; None: the default), which sets the balance
+    reserve a step plans with.
+    """
+    uncertainty = f"uncertainty: {{com: {com}}}\n" if com is not None else ""
+    return f"""
+name: g1_floor
+description: The G1 on open floor, a table behind it.
+robot: {{mjcf: {mjcf}, profile: unitree_g1}}
+scene:
+  table: {{position: [-0.65, 0.0], size: [0.4, 0.8, 0.04], height: 0.66}}
+  objects:
+    - {{name: book, shape: box, size: [0.14, 0.09, 0.05], position: [-0.55, 0.2], mass: 0.3}}
+  obstacles: []
+{uncertainty}mission:
+  - transfer: {{object: book, to: [-0.55, -0.2]}}
+"""
+
+
 @pytest.fixture(autouse=True)
 def _clear_blackboard() -> None:
     """py_trees' blackboard is global: start every test with an empty one."""

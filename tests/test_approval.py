@@ -288,11 +288,9 @@ def test_prompt_end_of_input_aborts() -> None:
 
 
 def test_prompt_times_out_to_abort_when_nobody_types() -> None:
-    start = time.monotonic()
-    decision, screen = _drive([], "--timeout", "0.5")
+    decision, screen = _drive([], "--timeout", "0.5")  # _drive's own limits are hang guards only
     assert decision["decision"] == "abort" and decision["by"] == "timeout"
     assert "abort in 0.5 s without an answer" in screen
-    assert time.monotonic() - start < 10
 
 
 def test_a_timed_out_prompt_stops_and_leaves_the_next_line_to_the_next_prompt() -> None:

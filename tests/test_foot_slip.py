@@ -4,7 +4,7 @@ Every slip here is made by MuJoCo: the floor's friction lowered (the floor's geo
 contact's friction by its priority) under a robot pushed or walking. The references are the
 physics itself: the foot body's displacement and turn since it started standing, its speed by
 finite differences, the contact points of a foot rolled onto its edge. Numbers are printed
-(pytest -s) and recorded in docs/detectors.md ("Foot slip") and docs/stepping.md.
+(pytest -s -n 0) and recorded in docs/detectors.md ("Foot slip") and docs/stepping.md.
 """
 
 from __future__ import annotations
@@ -27,11 +27,11 @@ from executive.monitoring.detectors import DetectorError, DetectorThresholds, Fa
 from executive.monitoring.live_risk import LiveRiskMonitor
 from executive.planning.plan import AlternativePlan
 from executive.planning.planner import Planner
-from executive.planning.stepping_geometry import yaw_of
 from executive.scenario import load, loads
 from executive.schema.failure_modes import mode_of_verdict
 from executive.schema.types import Scenario
 from executive.tasks.steps import build_subtree, plan_alternative
+from executive.world.heading import yaw_of
 from executive.world.model import World, build
 
 Status = py_trees.common.Status

@@ -23,6 +23,9 @@ from types import ModuleType
 
 import numpy as np
 import pytest
+import yaml
+
+from executive.schema.catalog import scenario_path
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE = ROOT / "examples" / "host_robot.py"
@@ -66,7 +69,12 @@ def test_the_host_drives_its_robot_to_the_goal_and_the_callback_approves(
 def test_ctrl_c_halts_the_tree_and_the_robot_holds(tmp_path: Path) -> None:
     out = tmp_path / "run"
     env = {**os.environ, "PYTHONPATH": str(ROOT)}
-    command = [sys.executable, "-u", str(EXAMPLE), "--rollouts", "0", "--out", str(out)]
+    # book_transfer with only the alternative it chooses: the stop is the subject, not the choice
+    doc = yaml.safe_load(scenario_path("book_transfer").read_text())
+    doc["mission"][0]["transfer"]["alternatives"] = ["left_to_right"]
+    scenario = tmp_path / "handover_only.yaml"
+    scenario.write_text(yaml.safe_dump(doc, sort_keys=False))
+    command = [sys.executable, "-u", str(EXAMPLE), str(scenario), "--rollouts", "0", "--out", str(out)]
     with subprocess.Popen(command, cwd=ROOT, env=env, stdout=subprocess.PIPE, text=True) as run:
         assert run.stdout is not None
         lines = []

@@ -22,6 +22,7 @@ import yaml
 
 from executive.decision.approval import ApprovalDecision, ApprovalRequest, CallbackChannel
 from executive.decision.audit import now_iso
+from executive.decision.physics_check import with_rollouts
 from executive.runtime.mission import Executive
 from executive.scenario import load
 from executive.schema.catalog import scenario_path
@@ -32,10 +33,12 @@ ENV = {**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")}
 
 
 def _risky_scenario(tmp_path: Path, threshold: float = 0.001) -> Path:
-    """book_transfer with a threshold below every alternative's risk: approval is always needed."""
+    """book_transfer with a threshold below every alternative's risk: approval is always needed.
+    No rollouts (the dry runs still run): the gate is the subject, not the risk's numbers."""
     doc = yaml.safe_load(scenario_path("book_transfer").read_text())
     doc["name"] = "book_transfer_risky"
     doc["risk"]["threshold"] = threshold
+    doc["risk"]["rollouts"] = {"count": 0}
     doc["robot"] = "humanoid"
     path = tmp_path / "risky.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
@@ -257,7 +260,8 @@ def test_the_worker_process_plans_and_the_ticks_only_swap_its_results_in(
 
     monkeypatch.setattr(planning_job, "assess_task", assess_spy)
     monkeypatch.setattr(kinds, "build_subtree", build_spy)  # TaskKind.subtree's default
-    executive = Executive("book_transfer", approval="auto", truth="exact")
+    # no rollouts: the worker still plans, assesses and dry-runs every alternative in physics
+    executive = Executive(with_rollouts(load("book_transfer"), 0), approval="auto", truth="exact")
     monitor = executive.monitor
     assert monitor is not None and executive.planning is not None
     selector = executive.selectors[0]

@@ -100,20 +100,6 @@ def test_rollouts_are_seeded_and_fused_with_their_counts() -> None:
     assert first.measured.components["collision"] is first.analytic.components["collision"]  # no update
 
 
-def test_plan_cli_shows_the_dry_runs(capsys: pytest.CaptureFixture[str]) -> None:
-    from executive.cli.main import main
-
-    assert main(["plan", "book_transfer", "--json"]) == 0
-    out = json.loads(capsys.readouterr().out)
-    rows = out["tasks"][0]["alternatives"]
-    assert all(r["physics"]["dry_run"]["outcome"] == "success" for r in rows)
-    chosen = next(r for r in rows if r["chosen"])
-    threshold = load("book_transfer").risk.threshold
-    assert chosen["needs_approval"] == (chosen["risk"]["expected_loss"] > threshold)
-    default = load("book_transfer").risk.rollouts.count
-    assert all(r["physics"]["rollouts"] == default for r in rows)
-
-
 def test_bad_rollout_settings_are_located() -> None:
     text = scenario_path("book_transfer").read_text()
     from executive.errors import ScenarioError

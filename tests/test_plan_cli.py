@@ -1,4 +1,8 @@
-"""`executive plan`: every alternative planned and assessed, one chosen, machine-readable output."""
+"""`executive plan`: every alternative planned and assessed, one chosen, machine-readable output.
+
+The bundled book_transfer is planned once for this module (``plan --json --plot``, with the
+scenario's own rollouts) and each test reads that one output.
+"""
 
 from __future__ import annotations
 
@@ -7,21 +11,33 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
+
+import pytest
+
+from executive.scenario import load
 
 SCRIPT = Path(sys.executable).parent / "executive"
 
 
-def test_plan_json_lists_every_alternative_with_probabilities(tmp_path: Path) -> None:
+@pytest.fixture(scope="module")
+def planned(tmp_path_factory: pytest.TempPathFactory) -> tuple[dict[str, Any], Path]:
+    """``executive plan book_transfer --json --plot DIR`` as a subprocess: its JSON and DIR."""
+    plots = tmp_path_factory.mktemp("plots")
     cmd = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli.main"]
     out = subprocess.run(
-        [*cmd, "plan", "book_transfer", "--json", "--plot", str(tmp_path)],
+        [*cmd, "plan", "book_transfer", "--json", "--plot", str(plots)],
         capture_output=True,
         text=True,
         timeout=600,
         env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")},
     )
     assert out.returncode == 0, out.stderr
-    doc = json.loads(out.stdout)
+    return json.loads(out.stdout), plots
+
+
+def test_plan_json_lists_every_alternative_with_probabilities(planned: tuple[dict[str, Any], Path]) -> None:
+    doc, tmp_path = planned
     (task,) = doc["tasks"]
     names = [a["name"] for a in task["alternatives"]]
     assert names == ["left", "right", "left_to_right"]
@@ -50,3 +66,15 @@ def test_plan_json_lists_every_alternative_with_probabilities(tmp_path: Path) ->
         # Their carry also lowers the pelvis ~4 cm, ~6 sigma above the safe posture's fall floor
         # (executive/robot/posture.py): ~1e-9.
         assert 0.0 < risk["left_to_right"]["fall"] < risk[one_arm]["fall"] < 1e-8
+
+
+def test_plan_cli_shows_the_dry_runs(planned: tuple[dict[str, Any], Path]) -> None:
+    """Every alternative's dry run succeeded; the gate's verdict and the rollouts are the scenario's."""
+    doc, _ = planned
+    rows = doc["tasks"][0]["alternatives"]
+    assert all(r["physics"]["dry_run"]["outcome"] == "success" for r in rows)
+    chosen = next(r for r in rows if r["chosen"])
+    threshold = load("book_transfer").risk.threshold
+    assert chosen["needs_approval"] == (chosen["risk"]["expected_loss"] > threshold)
+    default = load("book_transfer").risk.rollouts.count
+    assert all(r["physics"]["rollouts"] == default for r in rows)

@@ -121,7 +121,10 @@ def test_guard_values_are_the_guards(run: dict[str, Any]) -> None:
     record = load_record(run["folder"])
     world = rebuild_world(record)
     checked = np.flatnonzero(record.guard >= 0)
-    assert len(checked) > 0.5 * len(record)  # the motions are most of the run
+    # the motions are most of the execution (the frames while it plans follow the wall clock: as
+    # many as the machine's speed makes them)
+    executing = next(p["frame"] for p in record.phases if p["phase"] == "executing")
+    assert len(checked) > 0.5 * (len(record) - executing)
     assert np.all(record.guard_ok[checked] == 1)
     assert np.all(record.clearance[checked] >= run["guard_min"] - 1e-6)
     for frame in checked[:: max(1, len(checked) // 25)].tolist():

@@ -150,10 +150,12 @@ class Pty:
         self.kill()
 
 
-def _prompted(tmp_path: Path, name: str, timeout_s: float = 60) -> tuple[Pty, Path]:
+def _prompted(
+    tmp_path: Path, name: str, timeout_s: float = 60, alternatives: Sequence[str] = ("left", "right")
+) -> tuple[Pty, Path]:
     """A run of the cheap scenario waiting at its approval prompt."""
     out = tmp_path / name
-    scenario = _scenario(tmp_path, timeout_s=timeout_s, name=name)
+    scenario = _scenario(tmp_path, alternatives=alternatives, timeout_s=timeout_s, name=name)
     term = Pty([*CMD, "run", str(scenario), "--approve", "prompt", "--exact", "--out", str(out)])
     try:
         term.expect(PROMPT, timeout=120)
@@ -246,7 +248,8 @@ def test_approve_or_choose_then_ctrl_c_while_it_moves(tmp_path: Path, answer: st
 def test_ctrl_c_ctrl_d_and_timeout_at_the_prompt_are_logged(
     tmp_path: Path, keys: str | None, by: str, note: str
 ) -> None:
-    term, out = _prompted(tmp_path, "abort", timeout_s=60 if keys else 3)
+    # one alternative: the answer, not the choice, is the subject
+    term, out = _prompted(tmp_path, "abort", timeout_s=60 if keys else 3, alternatives=("left",))
     with term:
         if keys is None:
             assert re.search(r"[23] s left to answer", term.screen)

@@ -404,10 +404,10 @@ def test_malformed_scenario_is_rejected_with_key_path_and_reason(case: Case, tmp
 
 
 def test_alias_bomb_is_rejected_quickly() -> None:
-    start = time.perf_counter()
+    start = time.process_time()  # this process's CPU time: another process's load does not count
     with pytest.raises(ScenarioError, match="alias bomb"):
         scenario.loads(BOMB)
-    assert time.perf_counter() - start < 1.0
+    assert time.process_time() - start < 1.0
 
 
 def test_alias_within_limits_is_accepted() -> None:

@@ -77,7 +77,7 @@ def test_a_scenario_that_loads_runs_to_an_outcome(
         print(f"rejected: {str(exc)[:150]}")
         return
     out = tmp_path_factory.mktemp("run") / "run"
-    executive = Executive(scenario, approval="auto", out=out, pace_waiting=False)
+    executive = Executive(scenario, approval="auto", out=out)  # holds at the wall clock's pace while it plans
     executive.run(time_limit_s=300.0)  # of robot time: a stop is an outcome too
     print(f"ran: {executive.outcome}")
     assert executive.outcome in ("success", "failed", "aborted")

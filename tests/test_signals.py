@@ -222,7 +222,7 @@ def test_a_stop_signal_at_the_prompt_answers_abort(tmp_path: Path, how: str) -> 
     terminal hung up (its master closed: SIGHUP, and end of input for the prompt): the run ends
     as safely, though nobody sees what it prints."""
     out = tmp_path / "prompt"
-    scenario = _scenario(tmp_path)
+    scenario = _scenario(tmp_path, alternatives=("left",))  # the signal is the subject, not the choice
     argv = [*CMD, "run", str(scenario), "--approve", "prompt", "--exact", "--out", str(out)]
     term = Pty(["/usr/bin/env", f"PYTHONPATH={ENV['PYTHONPATH']}", *argv])
     with term:

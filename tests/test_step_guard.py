@@ -4,7 +4,7 @@ The references are physics and the fall model's own polygon: the guard must trip
 state whose CoM margin over the measured foot contacts (``support_polygon(from_contacts=True)``
 of the fall model; no polygon on one foot counts as outside) is under its limit, never on a
 normal step or walk at exact truth, and after a trip the robot must stand on both feet where the
-same push without the guard (or with another hold) makes it fall. Numbers are printed (pytest -s)
+same push without the guard (or with another hold) makes it fall. Numbers are printed (pytest -s -n 0)
 and recorded in docs/stepping.md and docs/live_guards.md.
 """
 
@@ -31,6 +31,7 @@ from executive.schema.types import Scenario
 from executive.tasks.steps import build_subtree, plan_alternative
 from executive.world.model import World, build
 from executive.world.polygon import signed_margin
+from tests.conftest import g1_floor_yaml
 
 Status = py_trees.common.Status
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
@@ -302,18 +303,7 @@ def test_a_walk_carrying_an_object_is_guarded_with_it_in_hand(fall_steps: Scenar
 
 
 def _g1_plan(g1_mjcf: Path) -> tuple[Scenario, StepPlan]:
-    scene = f"""
-name: g1_floor
-description: The G1 on open floor, a table behind it.
-robot: {{mjcf: {g1_mjcf}, profile: unitree_g1}}
-scene:
-  table: {{position: [-0.65, 0.0], size: [0.4, 0.8, 0.04], height: 0.66}}
-  objects:
-    - {{name: book, shape: box, size: [0.14, 0.09, 0.05], position: [-0.55, 0.2], mass: 0.3}}
-  obstacles: []
-mission:
-  - transfer: {{object: book, to: [-0.55, -0.2]}}
-"""
+    scene = g1_floor_yaml(g1_mjcf)
     scenario = loads(scene, source="g1_floor.yaml")
     world = build(scenario)
     planner = StepPlanner(world)

@@ -4,7 +4,7 @@ The bundled humanoid and the Unitree G1 (when the shared model is there) step fr
 start in MuJoCo (the plan made on the estimate world, executed on a truth world): forward and
 sideways, the fall detector silent, the foot landing near its planned foothold, the CoM inside the
 stance sole while the other foot is off the floor (measured from the simulated states here, not
-taken from the behaviour). Numbers are printed (pytest -s) and recorded in docs/stepping.md.
+taken from the behaviour). Numbers are printed (pytest -s -n 0) and recorded in docs/stepping.md.
 """
 
 from __future__ import annotations

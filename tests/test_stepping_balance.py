@@ -31,29 +31,16 @@ from executive.planning.stepping_geometry import stance_footholds, stance_of
 from executive.scenario import loads
 from executive.tasks.step import feet_stance
 from executive.world.model import Perturbation, World, build
-from tests.conftest import G1_MJCF
+from tests.conftest import G1_MJCF, g1_floor_yaml
 
 Status = py_trees.common.Status
-
-FLOOR = """
-name: g1_floor
-description: The G1 on open floor, a table behind it.
-robot: {{mjcf: {mjcf}, profile: unitree_g1}}
-scene:
-  table: {{position: [-0.65, 0.0], size: [0.4, 0.8, 0.04], height: 0.66}}
-  objects:
-    - {{name: book, shape: box, size: [0.14, 0.09, 0.05], position: [-0.55, 0.2], mass: 0.3}}
-uncertainty: {{com: 0.01}}
-mission:
-  - transfer: {{object: book, to: [-0.55, -0.2]}}
-"""
 
 
 @pytest.fixture(scope="module")
 def g1() -> tuple[str, World, StepPlanner]:
     if not G1_MJCF.is_file():
         pytest.skip(f"the shared Unitree G1 model is not at {G1_MJCF}")
-    scene = FLOOR.format(mjcf=G1_MJCF)
+    scene = g1_floor_yaml(G1_MJCF, com=0.01)
     world = build(loads(scene, source="g1_floor.yaml"))
     return scene, world, StepPlanner(world)
 

@@ -36,6 +36,7 @@ from executive.planning.timing import concatenate
 from executive.risk.collision import CollisionModel, CollisionProfile, KnotDistance, report_from_profile
 from executive.risk.combine import CombinedRisk, combine
 from executive.risk.fall import assess_fall
+from executive.risk.fall_balance import walk_phases
 from executive.risk.press import press_forces
 from executive.risk.push import plan_forces
 from executive.risk.report import RiskReport
@@ -93,9 +94,11 @@ def assess_plan(world: World, plan: AlternativePlan, collision_model: CollisionM
 
 
 def _fall_model(ctx: PlanContext) -> RiskReport:
-    """The fall mode: the CoM against the support polygon over the whole plan (:mod:`executive.risk.fall`)."""
+    """The fall mode: the CoM against the support polygon over the whole plan (:mod:`executive.risk.fall`),
+    the walks' knots as the balance feedback leaves the CoM error (:mod:`executive.risk.fall_balance`)."""
     scenario = ctx.world.scenario
-    return assess_fall(ctx.world, ctx.whole, scenario.risk, scenario.uncertainty, ctx.external)
+    walks = walk_phases(ctx.plan)
+    return assess_fall(ctx.world, ctx.whole, scenario.risk, scenario.uncertainty, ctx.external, walks)
 
 
 def assess_task(

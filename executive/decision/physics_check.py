@@ -93,7 +93,7 @@ def estimate_scenario(world: World) -> Scenario:
     Objects are put where the estimate has them now (position, yaw); the trial-to-trial scene
     variation is dropped: the rollouts' truths are sampled around this one estimate.
     """
-    from executive.tasks.hands import yaw_of
+    from executive.world.heading import yaw_of
 
     scenario = world.scenario
     objects = []

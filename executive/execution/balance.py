@@ -25,14 +25,12 @@ from numpy.typing import NDArray
 
 from executive.execution.com_estimate import CoMEstimate
 from executive.execution.cop_tracking import CoPTracking
+from executive.planning.balance_law import STEPPING_GAINS, pelvis_shift_offsets
 from executive.world.model import World
 
 __all__ = ["AnkleBalance", "BalanceTarget"]
 
 FloatArray = NDArray[np.float64]
-
-#: The damping (m^2) of the legs' least-squares pelvis shift.
-_DAMPING = 1e-4
 
 
 @dataclass(frozen=True)
@@ -100,10 +98,10 @@ class AnkleBalance:
         world: World,
         actuators: NDArray[np.int_],
         kp: FloatArray,
-        convergence: float = 1.0,
-        integral: float = 0.25,
-        estimate_rate: float = 1.0,
-        cop_rate: float = 1.0,
+        convergence: float = STEPPING_GAINS.convergence,
+        integral: float = STEPPING_GAINS.integral,
+        estimate_rate: float = STEPPING_GAINS.estimate_rate,
+        cop_rate: float = STEPPING_GAINS.cop_rate,
     ) -> None:
         model = world.model
         self.model = model
@@ -232,17 +230,15 @@ class AnkleBalance:
 
     def _shift_pelvis(self, out: FloatArray) -> None:
         """Add to ``out`` every leg's joint offsets that move its foot by :attr:`shift` relative to
-        the pelvis (the scratch data holds the target's kinematics)."""
+        the pelvis (the scratch data holds the target's kinematics;
+        :func:`~executive.planning.balance_law.pelvis_shift_offsets`)."""
         if not self.shift.any():
             return
-        goal = np.array([self.shift[0], self.shift[1], 0.0, 0.0, 0.0, 0.0])
         mujoco.mj_comPos(self.model, self._scratch)  # the Jacobians' cdof
+        legs = {self.feet[side]: [dof for _, dof in joints] for side, joints in self.legs.items()}
+        offsets = pelvis_shift_offsets(self.model, self._scratch, legs, self.shift, self._jac)
         for side, joints in self.legs.items():
-            mujoco.mj_jacBody(self.model, self._scratch, self._jac[:3], self._jac[3:], self.feet[side])
-            dofs = [dof for _, dof in joints]
-            jac = self._jac[:, dofs]  # damped least squares: a straight knee is singular
-            dq = jac.T @ np.linalg.solve(jac @ jac.T + _DAMPING * np.eye(6), goal)
-            for (index, _), delta in zip(joints, dq, strict=True):
+            for (index, _), delta in zip(joints, offsets[self.feet[side]], strict=True):
                 out[index] += delta
 
     def _soles(self, data: mujoco.MjData, support: Sequence[str]) -> FloatArray:

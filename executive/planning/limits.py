@@ -18,6 +18,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.planning.loaded_com import LoadedCoM
 from executive.world.polygon import convex_hull, halfplanes
 
 __all__ = [
@@ -93,24 +94,37 @@ class SupportPolygonLimit(mink.Limit):
     """CoM xy of the subtree of ``body`` stays inside ``polygon`` shrunk by ``margin``.
 
     Rows ``a_i^T J_c dq <= gain (b_i - margin - a_i^T c)``, with ``J_c`` from
-    ``mj_jacSubtreeCom`` (the Jacobian mink's ``ComTask`` uses).
+    ``mj_jacSubtreeCom`` (the Jacobian mink's ``ComTask`` uses). With ``com`` (a
+    :class:`~executive.planning.loaded_com.LoadedCoM` of ``body``), the CoM of the robot and the
+    object its hand carries instead.
     """
 
     def __init__(
-        self, model: mujoco.MjModel, body: int, polygon: SupportPolygon, margin: float, gain: float = 0.5
+        self,
+        model: mujoco.MjModel,
+        body: int,
+        polygon: SupportPolygon,
+        margin: float,
+        gain: float = 0.5,
+        com: LoadedCoM | None = None,
     ) -> None:
         self.model = model
         self.body = body
         self.normals = polygon.normals
         self.bounds = polygon.offsets - margin
         self.gain = gain
+        self.loaded = com
         self._jac = np.empty((3, model.nv))
 
     def compute_qp_inequalities(self, configuration: mink.Configuration, dt: float) -> mink.Constraint:
         del dt  # a position limit, like mink's ConfigurationLimit
         data = configuration.data
-        mujoco.mj_jacSubtreeCom(self.model, data, self._jac, self.body)
-        com = data.subtree_com[self.body][:2]
+        if self.loaded is not None:
+            self.loaded.jacobian(data, self._jac)
+            com = self.loaded.position(data)[:2]
+        else:
+            mujoco.mj_jacSubtreeCom(self.model, data, self._jac, self.body)
+            com = data.subtree_com[self.body][:2]
         G = self.normals @ self._jac[:2]
         h = self.gain * (self.bounds - self.normals @ com)
         return mink.Constraint(G=G, h=h)

@@ -17,10 +17,12 @@ within the whole-body planner's tilt limit, the pelvis above its safe posture's 
 in their ranges and speed limits, the arms and otherwise the waist held, the swing leg clear of
 the stance leg and both legs clear of the scene. Each phase is a
 :class:`~executive.planning.timing.Trajectory` re-timed as any planned motion: minimum-jerk, the
-zero-moment point inside the phase's support polygon. A foothold the leg cannot reach is refused
-with a :class:`StepPlanningError` naming the limits that bind (``binds``). :func:`measure_reach`
-measures by IK how far a foot can step; :func:`plan_steps` walks to a goal stance in steps within
-a fraction of that reach, alternating feet. The bundled physics follows a step with
+zero-moment point inside the phase's support polygon. "The CoM" is the robot's, or with an object
+a hand carries through the steps (``StepPlanner(world, carried=...)``) the robot's and the
+object's together (:class:`~executive.planning.loaded_com.LoadedCoM`). A foothold the leg cannot
+reach is refused with a :class:`StepPlanningError` naming the limits that bind (``binds``).
+:func:`measure_reach` measures by IK how far a foot can step; :func:`plan_steps` walks to a goal
+stance in steps within a fraction of that reach, alternating feet. The bundled physics follows a step with
 :class:`behaviours.step.Step`.
 
 Usage::

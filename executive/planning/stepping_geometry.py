@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.planning.stepping_types import Foothold
+from executive.world.heading import yaw_of, yaw_quat
 
 __all__ = [
     "circular_mean",
@@ -24,22 +25,9 @@ __all__ = [
     "stance_footholds",
     "stance_of",
     "stance_offsets",
-    "yaw_of",
-    "yaw_quat",
 ]
 
 FloatArray = NDArray[np.float64]
-
-
-def yaw_of(quat: FloatArray) -> float:
-    """The heading (rad) of an orientation (w x y z): the angle of its x axis about the vertical."""
-    w, x, y, z = (float(v) for v in quat)
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-
-
-def yaw_quat(yaw: float) -> FloatArray:
-    """The rotation (w x y z) by ``yaw`` (rad) about the world's vertical."""
-    return np.array([math.cos(0.5 * yaw), 0.0, 0.0, math.sin(0.5 * yaw)])
 
 
 def circular_mean(a: float, b: float) -> float:

@@ -20,13 +20,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.planning.limits import GeomPairCollisionLimit, SupportPolygon, SupportPolygonLimit, geom_pairs
+from executive.planning.loaded_com import LoadedCoM, LoadedComTask
 from executive.planning.problem import PlanningProblem
 from executive.planning.rotation import rotation_angle, rotation_log
 from executive.planning.stepping_ankles import AnkleReserveLimit, reserve_limit, waist_roll
-from executive.planning.stepping_geometry import yaw_quat
 from executive.planning.stepping_knees import KneeBendLimit, find_knees
 from executive.planning.stepping_types import StepConfig
 from executive.planning.types import PlanningError, attach_object
+from executive.world.heading import yaw_quat
 from executive.world.model import is_descendant
 
 __all__ = ["PhaseGoal", "StepIK", "StepPlanningError"]
@@ -109,7 +110,8 @@ class StepIK:
             for side, body in self.feet.items()
         }
         self.holds = {side: mink.FrameTask(body, "body", 1.0, 1.0) for side, body in self.feet.items()}
-        self.com = mink.ComTask(cost=[c.com_cost, c.com_cost, 0.0])
+        self.loaded = LoadedCoM(world, carried)  # the CoM balanced: the robot's and a carried object's
+        self.com = LoadedComTask(self.loaded, cost=[c.com_cost, c.com_cost, 0.0])
         base = world.ids.base_body
         self.pelvis = mink.FrameTask(base, "body", 0.0, c.pelvis_orientation_cost)
         self.home_pelvis_quat = np.array(world.home_qpos()[problem.quat_adr[0] : problem.quat_adr[0] + 4])
@@ -273,7 +275,9 @@ class StepIK:
         if goal.swing is not None and goal.foot_goal is not None:
             tasks.append(self.foot_tasks[goal.swing])
         margin = goal.margin + 0.002  # as the planner's: interpolated knots stay inside the checked one
-        balance = SupportPolygonLimit(self.model, problem.world.ids.base_body, goal.polygon, margin)
+        balance = SupportPolygonLimit(
+            self.model, problem.world.ids.base_body, goal.polygon, margin, com=self.loaded
+        )
         limits: list[mink.Limit] = [problem.tilt, problem.pelvis, balance, collisions]
         if self.knee_limit is not None:
             limits.append(self.knee_limit)
@@ -285,7 +289,7 @@ class StepIK:
     def _lead(self, goal: PhaseGoal) -> None:
         """Point the CoM and the swing foot's tasks a bounded way ahead along their straight lines."""
         data, c = self.configuration.data, self.config
-        com = data.subtree_com[self.problem.world.ids.base_body][:2]
+        com = self.loaded.position(data)[:2]
         delta = goal.com_goal - com
         alpha = min(1.0, c.com_lead / max(float(np.linalg.norm(delta)), 1e-12))
         self.com.set_target(np.array([*(com + alpha * delta), 0.0]))
@@ -324,7 +328,7 @@ class StepIK:
 
     def com_error(self, goal: PhaseGoal) -> float:
         """The CoM's xy distance (m) from its goal."""
-        com = self.configuration.data.subtree_com[self.problem.world.ids.base_body][:2]
+        com = self.loaded.position(self.configuration.data)[:2]
         return float(np.linalg.norm(com - goal.com_goal))
 
     def _error(self, goal: PhaseGoal) -> float:
@@ -340,7 +344,7 @@ class StepIK:
         ``com_region`` shrunk by ``region_margin``."""
         if goal.com_region is None or not self._foot_arrived(goal):
             return False
-        com = self.configuration.data.subtree_com[self.problem.world.ids.base_body][:2]
+        com = self.loaded.position(self.configuration.data)[:2]
         return goal.com_region.margin(com) >= goal.region_margin
 
     def _foot_arrived(self, goal: PhaseGoal) -> bool:
@@ -380,7 +384,7 @@ class StepIK:
         if self.ankle_limit is not None:
             out += self.ankle_limit.binding(q, goal.held)
         base = problem.world.ids.base_body
-        com_margin = goal.polygon.margin(data.subtree_com[base][:2])
+        com_margin = goal.polygon.margin(self.loaded.position(data)[:2])
         if com_margin <= goal.margin + 0.002 + _BOUND_SLACK:
             which = "stance sole" if len(goal.held) == 1 else "feet's support polygon"
             out.append(f"the CoM at the {which}'s edge ({com_margin * 1000:.0f} mm inside)")

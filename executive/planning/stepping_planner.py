@@ -21,11 +21,12 @@ from numpy.typing import NDArray
 
 from executive.planning.limits import GeomPairCollisionLimit, SupportPolygon
 from executive.planning.problem import PlanningProblem
-from executive.planning.stepping_geometry import circular_mean, foot_pose, foothold_of, yaw_of
+from executive.planning.stepping_geometry import circular_mean, foot_pose, foothold_of
 from executive.planning.stepping_ik import PhaseGoal, StepIK, StepPlanningError
 from executive.planning.stepping_types import Foothold, StepConfig, StepPhase, StepPlan
 from executive.planning.timing import Frames, TimedJoints, Trajectory, build_trajectory
 from executive.planning.types import PlannerConfig, PlanningError, PlanningInputError
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
 __all__ = ["StepPlanner"]
@@ -198,7 +199,7 @@ class StepPlanner:
         """Where the CoM stands from the middle of the two-foot polygon in the configuration,
         in the frame turned by ``yaw`` (x, y; m): the robot's own stance."""
         data = self.configuration.data
-        off = data.subtree_com[self.world.ids.base_body][:2] - self.sole_polygon(self.sides).centre
+        off = self.ik.loaded.position(data)[:2] - self.sole_polygon(self.sides).centre
         c, s = np.cos(yaw), np.sin(yaw)
         return np.array([c * off[0] + s * off[1], -s * off[0] + c * off[1]])
 
@@ -264,6 +265,7 @@ class StepPlanner:
                 goal.polygon,
                 collisions,
                 floor,
+                self.ik.loaded,
             )
         except PlanningError as exc:  # the timing's: the same, as a step's error
             raise StepPlanningError(goal.name, f"step phase '{goal.name}': {exc}", (), iterations) from exc

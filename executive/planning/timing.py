@@ -17,6 +17,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from executive.planning.limits import GeomPairCollisionLimit, SupportPolygon
+from executive.planning.loaded_com import LoadedCoM
 from executive.planning.types import PlannerConfig, PlanningError, Relative
 
 __all__ = [
@@ -53,7 +54,7 @@ class Trajectory:
     times: FloatArray  # (K,) s from the segment start, times[0] == 0, strictly increasing
     qpos: FloatArray  # (K, nq)
     hand_paths: Mapping[str, FloatArray]  # side -> (K, 3) hand site positions
-    com_path: FloatArray  # (K, 3) whole-robot CoM, robot bodies only
+    com_path: FloatArray  # (K, 3) the CoM balanced: the robot's (a carrying walk's: with its object)
     carried: tuple[str, str] | None  # (side, object name)
     free_quat_adr: tuple[int, ...] = field(default=())
 
@@ -184,6 +185,7 @@ def build_trajectory(
     polygon: SupportPolygon,
     collisions: GeomPairCollisionLimit,
     floor: FloatArray,
+    loaded: LoadedCoM | None = None,
 ) -> Trajectory:
     """Re-time an IK path and check every knot: clearance and balance.
 
@@ -202,6 +204,8 @@ def build_trajectory(
     Knots are uniform in time. ``floor`` (m, one per collision pair) is the distance each pair
     must keep: its required clearance, or its distance at the start when it starts closer.
     A carried object is re-attached to its hand at every knot, so it moves rigidly with it.
+    ``loaded``: the CoM the knots balance and record (the robot's and a carried object's,
+    :class:`~executive.planning.loaded_com.LoadedCoM`); None: the robot's alone.
 
     Raises PlanningError when no timing keeps the zero-moment point inside, or a knot breaks
     a clearance or the CoM's support margin.
@@ -213,7 +217,9 @@ def build_trajectory(
     # Tangential acceleration a = |dq/ds| s'' <= v s'': bound s'' by a / v (v the largest limit).
     ratio = cfg.acceleration_limit / float(np.max(joints.limits))
     data = mujoco.MjData(model)
-    times, knots = _zmp_timed_knots(model, data, cfg, path, s_path, ratio, name, relative, polygon, frames)
+    times, knots = _zmp_timed_knots(
+        model, data, cfg, path, s_path, ratio, name, relative, polygon, frames, loaded
+    )
     # The last round's knots, a carried object re-attached to its hand (as _knot_kinematics left them).
     qpos, com = knots.qpos, knots.com
     hands = {s: knots.hands[:, i].copy() for i, s in enumerate(frames.hand_sites)}
@@ -257,6 +263,7 @@ def _zmp_timed_knots(
     relative: Relative | None,
     polygon: SupportPolygon,
     frames: Frames,
+    loaded: LoadedCoM | None = None,
 ) -> tuple[FloatArray, _Knots]:
     """Knot times and kinematics of the path's min-jerk timing (:func:`retime`, ``ratio`` the
     bound of d2s/dt2), stretched by ``cfg.zmp_stretch`` until the zero-moment point keeps
@@ -268,7 +275,7 @@ def _zmp_timed_knots(
     for _ in range(cfg.zmp_retime_rounds):
         times, s_knots = retime(float(s_path[-1]), ratio, cfg.knot_spacing, cfg.max_knots, duration)
         qpos = interpolate_path(path, s_path, s_knots, frames.quat_adr)
-        knots = _knot_kinematics(model, data, qpos, relative, frames)
+        knots = _knot_kinematics(model, data, qpos, relative, frames, loaded)
         com = knots.com
         zmp = zmp_path(times, com)
         worst_zmp = float(np.min(polygon.margins(zmp)))
@@ -345,9 +352,15 @@ class _Knots(NamedTuple):
 
 
 def _knot_kinematics(
-    model: mujoco.MjModel, data: mujoco.MjData, qpos: FloatArray, relative: Relative | None, frames: Frames
+    model: mujoco.MjModel,
+    data: mujoco.MjData,
+    qpos: FloatArray,
+    relative: Relative | None,
+    frames: Frames,
+    loaded: LoadedCoM | None = None,
 ) -> _Knots:
-    """Forward kinematics at every knot, a carried object re-attached to its hand.
+    """Forward kinematics at every knot, a carried object re-attached to its hand; the CoM is
+    ``loaded``'s (the robot's and the object its hand carries) when given, else the robot's.
 
     The object is attached after the loop, for all knots at once (``attach_object``'s formula),
     and its geoms posed from its free joint as ``mj_kinematics`` poses them: the robot's
@@ -366,7 +379,7 @@ def _knot_kinematics(
         data.qpos[:] = attached[k]
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
-        com[k] = data.subtree_com[frames.base_body]
+        com[k] = data.subtree_com[frames.base_body] if loaded is None else loaded.position(data)
         hands[k] = data.site_xpos[sites]
         xpos[k] = data.geom_xpos
         xmat[k] = data.geom_xmat

@@ -11,8 +11,8 @@ The public names of the fall model, gathered from the modules that define them:
   the CoM error is one bias shared by every knot.
 - :mod:`executive.risk.fall_support`: :func:`support_polygon`, the convex hull of the feet's
   ground contacts.
-- :mod:`executive.risk.fall_compliance`: :func:`single_support_gain`, how much a CoM bias grows on
-  one foot (the stance ankle's servo compliance), applied at every single-support knot.
+- :mod:`executive.risk.fall_balance`: what the stepping balance feedback leaves of the CoM bias at
+  each knot of a walk (:func:`knot_gains`), and the walks of a plan (:func:`walk_phases`).
 - :mod:`executive.risk.fall_capture`: :func:`capture_point` (Pratt et al. 2006; Koolen et al. 2012).
 - :mod:`executive.risk.fall_force`: :class:`ExternalForce`, :func:`zero_moment_points`,
   :func:`force_scale_distribution`: a hand's push or press in the model.

@@ -16,20 +16,24 @@ Sources (one line each):
   Phi((floor - z_min) / sigma); a planned torso tilt beyond ``SafePosture.fall_tilt_deg`` is a
   fall for sure. The failures are independent: P(fall) = 1 - (1 - P_support)(1 - P_pelvis)(1 -
   P_tilt), and the same for both bounds.
-- Single support: the polygon is the stance sole's. Knots with one foot down may weigh the CoM
-  bias by a gain (the probabilities taken in the polygons shrunk by it, the margins in the polygons
-  as they are); :func:`single_support_gain` is 1 for the steps the executive runs (docs/stepping.md,
-  "Falls"), :mod:`executive.risk.fall_compliance` the open-loop stance's.
+- Walks: the polygon is the feet's on the floor (the stance sole's on one foot). A walk runs with
+  the balance feedback, which takes most of the CoM bias out before a foot lifts: each knot of a
+  walk weighs the bias by its gain (:func:`executive.risk.fall_balance.knot_gains`; the
+  probabilities taken in the polygons shrunk by it, :func:`executive.risk.fall_balance.shrink_polygons`,
+  the margins in the polygons as they are), and a walk that carries an object counts its mass in
+  the CoM (docs/stepping.md, "Falls").
 """
 
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 
 import numpy as np
 from numpy.typing import NDArray
 
 from executive.planning.timing import Trajectory
+from executive.risk.fall_balance import BalancedPhase, carried_bodies, knot_gains, shrink_polygons
 from executive.risk.fall_batch import (
     KnotPolygons,
     edge_probabilities_batch,
@@ -37,7 +41,6 @@ from executive.risk.fall_batch import (
     signed_margin_batch,
 )
 from executive.risk.fall_capture import capture_points
-from executive.risk.fall_compliance import ankle_stiffness, shrink_polygons
 from executive.risk.fall_force import ExternalForce, support_points, under_force
 from executive.risk.fall_support import FallKnots, fall_knots
 from executive.risk.gaussian import independent_union, normal_cdf
@@ -107,7 +110,7 @@ def _per_knot(
     polygons: KnotPolygons, scored: KnotPolygons, mus: FloatArray, xi: FloatArray, cov: FloatArray
 ) -> dict[str, FloatArray]:
     """Per knot: signed margin of ``mus``, capture margin of ``xi`` (in ``polygons``), exact and
-    Boole P(outside) (in ``scored``: the polygons shrunk by the single-support gain)."""
+    Boole P(outside) (in ``scored``: the polygons shrunk by the walk's gain on the bias)."""
     count = len(mus)
     out = {name: np.zeros(count) for name in ("margin", "capture", "probability", "lower", "upper")}
     for size, (knots, verts) in polygons.groups.items():
@@ -122,35 +125,6 @@ def _per_knot(
     return out
 
 
-def single_support_gain(mass: float, gravity: float, height: FloatArray, stiffness: float) -> FloatArray:
-    """The CoM bias's gain on one foot for the steps the executive runs: 1.
-
-    A step runs with the capture-point ankle balance and the pelvis shift on
-    (:mod:`executive.execution.balance`): the CoM error neither grows on the ankle's compliance
-    nor peaks at lift-off as an open-loop stance's would (2 A,
-    :func:`executive.risk.fall_compliance.single_support_gain`); measured, the plain model scores
-    the falls best (docs/stepping.md, "Falls").
-    """
-    return np.ones_like(np.asarray(height, dtype=float))
-
-
-def _single_support_gains(world: World, knots: FallKnots) -> FloatArray:
-    """Per knot: the CoM error's gain on the stance ankle's compliance when one foot alone is down
-    (:func:`executive.risk.fall_compliance.single_support_gain`), else 1."""
-    gains = np.ones(len(knots.times))
-    if len(knots.feet_down) < 2:
-        return gains
-    down = np.stack(list(knots.feet_down.values()))  # (F, K)
-    for i, side in enumerate(knots.feet_down):
-        alone = down[i] & (np.sum(down, axis=0) == 1)
-        if np.any(alone):
-            height = knots.coms[alone, 2] - knots.ground
-            gains[alone] = single_support_gain(
-                knots.mass, knots.gravity, height, ankle_stiffness(world, side)
-            )
-    return gains
-
-
 def _with_posture(p: float, posture: dict[str, float]) -> float:
     """1 - (1 - p)(1 - P_pelvis)(1 - P_tilt): the support's and the posture's independent failures."""
     return independent_union([p, posture["probability_pelvis"], posture["probability_tilt"]])
@@ -162,6 +136,7 @@ def assess_fall(
     risk_config: RiskConfig,
     uncertainty: Uncertainty,
     external: ExternalForce | None = None,
+    walks: Sequence[BalancedPhase] = (),
 ) -> RiskReport:
     """Fall risk of a trajectory on ``world``'s model (see the module doc for the formulas).
 
@@ -180,6 +155,8 @@ def assess_fall(
             (:func:`executive.risk.fall_force.zero_moment_points`) instead of the CoM, and the
             probability is averaged over the force's uncertain scale
             (:func:`executive.risk.fall_force.force_scale_distribution`).
+        walks: the phases of the trajectory's walks (:func:`executive.risk.fall_balance.walk_phases`):
+            where the balance feedback runs, and what a hand carries through them.
 
     Returns:
         The ``fall`` report; its details name the minimum margin, the posture's part and, with a
@@ -191,10 +168,11 @@ def assess_fall(
     cfg = risk_config.fall
     radius = cfg.circle_radius if cfg.circle_radius is not None else cfg.sigmas * uncertainty.com
     cov = check_covariance((uncertainty.com**2) * np.eye(2))
-    knots = fall_knots(world, trajectory)
+    times = np.asarray(trajectory.times, dtype=float)
+    knots = fall_knots(world, trajectory, carried_bodies(times, walks) if walks else None)
     xi = capture_points(knots.coms, knots.times, knots.gravity, knots.ground)
     mus = support_points(knots, external)  # the traces at the mean felt force
-    gains = _single_support_gains(world, knots)
+    gains = knot_gains(world, knots, walks)
     scored = (
         dataclasses.replace(knots, polygons=shrink_polygons(knots.polygons, knots.coms[:, :2], gains))
         if np.any(gains != 1.0)
@@ -203,7 +181,7 @@ def assess_fall(
     per = _per_knot(knots.polygons, scored.polygons, mus, xi, cov)
     (probability, lower, upper), force_facts = under_force(scored, external, cov)
     if np.any(gains != 1.0):
-        force_facts["max_single_support_gain"] = float(np.max(gains))
+        force_facts["max_walk_gain"] = float(np.max(gains))
     posture = _posture_probability(world, knots.pelvis, knots.upright, float(uncertainty.com))
     return _report(
         world,

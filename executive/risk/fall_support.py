@@ -10,12 +10,14 @@ torso uprightness, which the fall model scores. ``support_polygon`` is re-export
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.planning.loaded_com import LoadedCoM
 from executive.planning.timing import Trajectory
 from executive.risk.fall_batch import KnotPolygons, hulls
 from executive.world.model import World
@@ -140,8 +142,13 @@ class FallKnots:
     feet_down: dict[str, NDArray[np.bool_]] = field(default_factory=dict)  # side -> (K,) on the ground
 
 
-def fall_knots(world: World, trajectory: Trajectory) -> FallKnots:
+def fall_knots(
+    world: World, trajectory: Trajectory, carried: Sequence[tuple[str, str] | None] | None = None
+) -> FallKnots:
     """The robot's CoM, support polygon and posture at every knot (MuJoCo kinematics, robot bodies only).
+
+    ``carried``: per knot, (hand side, object) of an object whose mass counts in the CoM there
+    (a walk that carries it: :class:`executive.planning.loaded_com.LoadedCoM`), or None.
 
     Raises:
         ValueError: qpos that do not fit the model, or a knot whose foot points span no polygon.
@@ -162,11 +169,13 @@ def fall_knots(world: World, trajectory: Trajectory) -> FallKnots:
     xpos = np.zeros((count, len(feet), 3))
     xmat = np.zeros((count, len(feet), 9))
     pelvis, upright = np.zeros(count), np.zeros(count)
+    loads = {load: LoadedCoM(world, load) for load in set(carried or ()) if load is not None}
     for k in range(count):
         data.qpos[:] = qpos[k]
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
-        coms[k] = data.subtree_com[base]
+        load = carried[k] if carried is not None else None
+        coms[k] = data.subtree_com[base] if load is None else loads[load].position(data)
         xpos[k] = data.geom_xpos[feet]
         xmat[k] = data.geom_xmat[feet]
         pelvis[k] = data.xpos[base][2]

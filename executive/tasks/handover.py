@@ -17,9 +17,10 @@ from numpy.typing import NDArray
 
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import PlanningError
-from executive.tasks.hands import UP, HandFrames, yaw_of
+from executive.tasks.hands import UP, HandFrames
 from executive.tasks.phases import grasp_height, pick, place
 from executive.tasks.placement import Destination, target_placement
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
 __all__ = ["Exchange", "exchange", "transfer"]

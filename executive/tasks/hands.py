@@ -15,9 +15,10 @@ from numpy.typing import NDArray
 
 from executive.planning.planner import HandTarget
 from executive.planning.types import site_quat
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
-__all__ = ["ONE_HAND", "UP", "HandFrames", "top_down_quat", "yaw_of"]
+__all__ = ["ONE_HAND", "UP", "HandFrames", "top_down_quat"]
 
 FloatArray = NDArray[np.float64]
 UP = np.array([0.0, 0.0, 1.0])
@@ -33,12 +34,6 @@ def top_down_quat(yaw: float) -> FloatArray:
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, np.column_stack([x_axis, y_axis, z_axis]).ravel())
     return quat
-
-
-def yaw_of(quat: FloatArray) -> float:
-    """The z-y-x Euler yaw of a unit quaternion (w x y z)."""
-    w, x, y, z = quat
-    return float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
 
 
 class HandFrames:

@@ -24,9 +24,10 @@ from executive.schema.scene_keys import OBJECT_NAME, TARGET, TO_YAW
 from executive.schema.types import Body, SceneConfig
 from executive.schema.yaml_nodes import Node
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
-from executive.tasks.hands import ONE_HAND, UP, HandFrames, yaw_of
+from executive.tasks.hands import ONE_HAND, UP, HandFrames
 from executive.tasks.phases import carry_lane_front, grasp_height, lane_carry, pick, place
 from executive.tasks.placement import placed_verdict, target_placement
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
 __all__ = ["PickKind", "PickTask", "PlaceKind", "PlaceTask", "held_verdict", "holder_of"]

@@ -15,7 +15,7 @@ import numpy as np
 
 from executive.schema.types import Body
 from executive.tasks.base import Verdict
-from executive.tasks.hands import yaw_of
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
 __all__ = ["Destination", "Placement", "placed_verdict", "target_placement"]

@@ -23,9 +23,10 @@ from executive.planning.planner import PlanningError
 from executive.risk.shapes import body_geometry
 from executive.schema.readers import over_table
 from executive.schema.types import Body
-from executive.tasks.hands import HandFrames, yaw_of
+from executive.tasks.hands import HandFrames
 from executive.tasks.phases import one_hand_leg
 from executive.tasks.placement import Destination, target_placement
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
 __all__ = ["REGRASPS", "Spot", "midway_spot", "transfer"]

@@ -22,12 +22,13 @@ from numpy.typing import NDArray
 
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import PlanningError
-from executive.tasks.hands import HandFrames, yaw_of
+from executive.tasks.hands import HandFrames
 from executive.tasks.phases import back_along_lane, lane_carry, one_hand_layout, pick, place
 from executive.tasks.placement import Destination, target_placement
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
-__all__ = ["SIDESTEPS", "sidestep_stance", "transfer"]
+__all__ = ["SIDESTEPS", "cannot_sidestep", "sidestep_stance", "transfer"]
 
 FloatArray = NDArray[np.float64]
 
@@ -60,6 +61,14 @@ def sidestep_stance(
     return x + own * d * float(left[0]), y + own * d * float(left[1]), heading
 
 
+def cannot_sidestep(world: World, side: str) -> str:
+    """Why ``side`` cannot pick, step sideways and place on this robot ("" if it can)."""
+    if side not in world.profile.sides:
+        return f"robot '{world.profile.name}' has no {side} arm"
+    feet = len(world.profile.feet)
+    return "" if feet == 2 else f"robot '{world.profile.name}' has {feet} feet; a side-step needs two"
+
+
 def transfer(world: World, task: Destination, side: str, cfg: CompositionConfig) -> list[Step]:
     """The steps of a side-step transfer by ``side``: pick, into the lane, walk, along the lane, place.
 
@@ -69,9 +78,8 @@ def transfer(world: World, task: Destination, side: str, cfg: CompositionConfig)
             within the hand's reach from where the robot stands (nothing to step for).
     """
     name = f"{side}_sidestep"
-    feet = tuple(world.profile.feet)
-    if len(feet) != 2:
-        _refuse(name, f"robot '{world.profile.name}' has {len(feet)} feet; a side-step needs two")
+    if why := cannot_sidestep(world, side):
+        _refuse(name, why)
     h = HandFrames(world)
     body = next(b for b in world.scenario.scene.objects if b.name == task.object)
     pos, quat = world.object_pose(task.object)
@@ -81,11 +89,11 @@ def transfer(world: World, task: Destination, side: str, cfg: CompositionConfig)
     if layout.through:
         _refuse(name, f"the {side} hand reaches past a wall to '{task.object}'; it cannot walk with it")
     stance = sidestep_stance(h, side, layout.grasp, layout.place_at)
-    moved = float(np.hypot(stance[0] - h.base[0], stance[1] - h.base[1]))
-    if moved == 0.0:
+    moved = np.array([stance[0] - h.base[0], stance[1] - h.base[1], 0.0])
+    if not moved.any():
         _refuse(name, f"the place is within the {side} hand's side of the body already: nothing to step for")
     there = HandFrames(world, stance)
-    lead = _leading_foot(h, stance, feet)
+    lead = _leading_foot(h, moved, tuple(world.profile.feet))
     carried = (side, task.object)
     # The walk carries the object in the lane straight ahead of the hand's home pose, the arm
     # tucked in front of its shoulder; the hand finishes the lane from where the robot stands then.
@@ -107,9 +115,8 @@ def transfer(world: World, task: Destination, side: str, cfg: CompositionConfig)
     ]
 
 
-def _leading_foot(h: HandFrames, stance: tuple[float, float, float], feet: tuple[str, ...]) -> str:
-    """The foot on the side the base moves to (it opens the stance; the other closes it)."""
-    moved = np.array([stance[0] - h.base[0], stance[1] - h.base[1], 0.0])
+def _leading_foot(h: HandFrames, moved: FloatArray, feet: tuple[str, ...]) -> str:
+    """The foot on the side the base moves to by ``moved`` (it opens the stance; the other closes it)."""
     toward = h.side_of_body(h.base + moved)
     return "left" if toward > 0 and "left" in feet else "right" if "right" in feet else feet[0]
 

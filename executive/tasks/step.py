@@ -20,11 +20,12 @@ from dataclasses import dataclass
 import mujoco
 
 from executive.planning.plan import CompositionConfig, Step
-from executive.planning.stepping_geometry import foothold_of, stance_of, stance_offsets, yaw_of
+from executive.planning.stepping_geometry import foothold_of, stance_of, stance_offsets
 from executive.schema.declarations import Block, Number, Vector
 from executive.schema.types import SceneConfig
 from executive.schema.yaml_nodes import Node
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
 __all__ = ["STANCE_TOLERANCE", "StepKind", "StepTask", "feet_stance"]

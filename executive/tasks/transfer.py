@@ -39,10 +39,11 @@ from executive.tasks import handover as handover_steps
 from executive.tasks import regrasp as regrasp_steps
 from executive.tasks import sidestep as sidestep_steps
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
-from executive.tasks.hands import ONE_HAND, HandFrames, yaw_of
+from executive.tasks.hands import ONE_HAND, HandFrames
 from executive.tasks.phases import one_hand_leg
 from executive.tasks.pick_place import PlaceTask, place_steps, site_offset
 from executive.tasks.placement import placed_verdict, target_placement
+from executive.world.heading import yaw_of
 from executive.world.model import World
 
 __all__ = ["HANDOVERS", "REGRASPS", "SIDESTEPS", "TransferKind", "TransferTask", "transfer_steps"]
@@ -111,7 +112,7 @@ class TransferKind(TaskKind):
             reason = f"robot '{world.profile.name}' has no {' and no '.join(missing)} arm" if missing else ""
             out.append(Alternative(name, reason))
         for name, side in sidestep_steps.SIDESTEPS.items():
-            out.append(Alternative(name, _cannot_sidestep(world, side)))
+            out.append(Alternative(name, sidestep_steps.cannot_sidestep(world, side)))
         holder = world.held_by(task.object)
         if holder is None:
             return out
@@ -148,14 +149,6 @@ class TransferKind(TaskKind):
 
 
 HANDOVERS_SIDES = {"left_to_right": ("left", "right"), "right_to_left": ("right", "left")}
-
-
-def _cannot_sidestep(world: World, side: str) -> str:
-    """Why ``side`` cannot pick, step sideways and place on this robot ("" if it can)."""
-    if side not in world.profile.sides:
-        return f"robot '{world.profile.name}' has no {side} arm"
-    feet = len(world.profile.feet)
-    return "" if feet == 2 else f"robot '{world.profile.name}' has {feet} feet; a side-step needs two"
 
 
 def one_hand_steps(world: World, task: TransferTask, side: str, cfg: CompositionConfig) -> list[Step]:

@@ -32,6 +32,7 @@ from executive.robot.profile import load_profile
 from executive.robot.profile_types import RobotProfile
 from executive.schema.types import Body, Scenario
 from executive.world import model_cache
+from executive.world.heading import yaw_quat
 
 __all__ = [
     "Grip",
@@ -435,7 +436,7 @@ def _add_table(spec: mujoco.MjSpec, scenario: Scenario, friction_scale: float) -
     body = spec.worldbody.add_body(
         name="table",
         pos=[table.position[0], table.position[1], 0.0],
-        quat=_yaw_quat(table.yaw_rad).tolist(),
+        quat=yaw_quat(table.yaw_rad).tolist(),
     )
     names = ["table_top"]
     body.add_geom(
@@ -498,10 +499,6 @@ def _add_obstacle(spec: mujoco.MjSpec, body: Body, pos: list[float], quat: list[
         rgba=list(body.rgba or _OBSTACLE_RGBA),
         **_geom_kwargs(body),
     )
-
-
-def _yaw_quat(yaw: float) -> FloatArray:
-    return np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
 
 
 def _rpy_quat(roll: float, pitch: float, yaw: float) -> FloatArray:

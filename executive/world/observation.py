@@ -37,6 +37,7 @@ import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.world.heading import yaw_of, yaw_quat
 from executive.world.model import Grip, World
 from executive.world.touch import hand_contacts
 
@@ -146,16 +147,10 @@ class SimulatedSensor:
         return seen
 
 
-def _yaw(quat: FloatArray) -> float:
-    """The z-y-x Euler yaw (rad) of a unit quaternion (w x y z) (as ``executive.tasks.hands.yaw_of``)."""
-    w, x, y, z = quat
-    return float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
-
-
 def _turn(quat: FloatArray, yaw: float) -> FloatArray:
     """``quat`` turned by ``yaw`` (rad) about the world's vertical."""
     out = np.empty(4)
-    mujoco.mju_mulQuat(out, np.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)]), np.asarray(quat, float))
+    mujoco.mju_mulQuat(out, yaw_quat(yaw), np.asarray(quat, float))
     return out
 
 
@@ -243,7 +238,7 @@ def update_estimate(world: World, q: FloatArray, seen: Observation) -> list[dict
     mujoco.mj_kinematics(world.model, world.data)
     for record in records:
         record["position"], quat = world.object_pose(record["name"])
-        record["quat"], record["yaw"] = quat, _yaw(quat)
+        record["quat"], record["yaw"] = quat, yaw_of(quat)
     return records
 
 
@@ -374,7 +369,7 @@ def follow_base_of(world: World, robot: Any) -> dict[str, Any]:
     world.data.qpos[world.base_qpos] = np.concatenate([pos, np.asarray(quat) / np.linalg.norm(quat)])
     world.follows_base = True
     mujoco.mj_kinematics(world.model, world.data)
-    return {"position": [float(v) for v in pos], "yaw": _yaw(np.asarray(quat, dtype=float))}
+    return {"position": [float(v) for v in pos], "yaw": yaw_of(np.asarray(quat, dtype=float))}
 
 
 def measured_qpos(world: World, robot: Any) -> FloatArray:
