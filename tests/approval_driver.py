@@ -34,13 +34,13 @@ REQUEST = ApprovalRequest(
         AlternativeRisk(
             "left_to_right",
             True,
-            {"collision": 0.0, "fall": 0.0012, "drop": 0.0019, "combined": 0.0031, "expected_loss": 0.41},
+            {"collision": 0.0, "fall": 0.0012, "drop": 0.0019, "tracking": 0.0, "combined": 0.0031, "expected_loss": 0.41},
             0.41,
         ),
         AlternativeRisk(
             "left",
             True,
-            {"collision": 0.0248, "fall": 0.0015, "drop": 0.0014, "combined": 0.0277, "expected_loss": 0.52},
+            {"collision": 0.0248, "fall": 0.0015, "drop": 0.0014, "tracking": 0.0, "combined": 0.0277, "expected_loss": 0.52},
             0.52,
         ),
         AlternativeRisk("right", False, {}, None, reason="right hand cannot reach"),
