@@ -8,6 +8,7 @@ import numpy as np
 import py_trees
 
 from behaviours.robot_access import RobotBehaviour
+from executive.planning.plan import MOVE_TOLERANCE
 from executive.planning.planner import Trajectory
 from executive.schema.types import GuardConfig
 
@@ -48,7 +49,7 @@ class MoveHand(RobotBehaviour):
         self,
         name: str,
         trajectory: Trajectory,
-        tolerance: float = 0.03,
+        tolerance: float = MOVE_TOLERANCE,
         settle_s: float = 0.6,
         touching: tuple[str, str] | None = None,
         approaching: tuple[str, str] | None = None,
@@ -65,6 +66,7 @@ class MoveHand(RobotBehaviour):
         self._ahead_q = np.zeros((0, 0))  # their qpos rows (one more than times: the next target)
         self._ahead_i = 0  # the row of the next tick
         self._ahead_load: np.ndarray | None = None  # leg loads of the sampled targets (bundled physics)
+        self.end_error: dict[str, np.ndarray] | None = None  # per hand, executed - planned end (m)
 
     @property
     def started_at(self) -> float:
@@ -88,6 +90,7 @@ class MoveHand(RobotBehaviour):
         self._robot = self.robot  # the robot of this run of the motion: one blackboard read
         self._t0 = self._robot.time
         self._ahead_t, self._ahead_i = np.zeros(0), 0
+        self.end_error = None
         self.feedback_message = f"following {self.trajectory.name} ({self.trajectory.duration:.2f} s)"
         self._set_detector_phase()
 
@@ -115,14 +118,16 @@ class MoveHand(RobotBehaviour):
             return Status.RUNNING
         error = self.hand_error()
         if error <= self.tolerance:
-            self.feedback_message = f"{self.trajectory.name}: reached (hand error {error * 1000:.0f} mm)"
+            self.end_error = self.hand_offsets()
+            self.feedback_message = f"reached (hand error {error * 1000:.0f} mm)"
             return Status.SUCCESS
         if t < self.trajectory.duration + self.settle_s:
             return Status.RUNNING
+        self.end_error = self.hand_offsets()
+        # The message is the behaviour's own; whoever reports it prefixes the behaviour's name.
         return self.fail(
             "tracking",
-            f"{self.trajectory.name}: hand {error * 1000:.0f} mm from its planned end "
-            f"(tolerance {self.tolerance * 1000:.0f} mm)",
+            f"hand {error * 1000:.0f} mm from its planned end (tolerance {self.tolerance * 1000:.0f} mm)",
         )
 
     def _targets(self, t: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
@@ -142,11 +147,14 @@ class MoveHand(RobotBehaviour):
 
     def hand_error(self) -> float:
         """Largest distance between a hand site and its planned final position."""
+        return max(float(np.linalg.norm(e)) for e in self.hand_offsets().values())
+
+    def hand_offsets(self) -> dict[str, np.ndarray]:
+        """Per hand, where its site is less its planned final position (world frame, m)."""
         data, sites = self.robot.data, self.robot.world.ids.hand_sites
-        return max(
-            float(np.linalg.norm(data.site_xpos[sites[side]] - path[-1]))
-            for side, path in self.trajectory.hand_paths.items()
-        )
+        return {
+            side: data.site_xpos[sites[side]] - path[-1] for side, path in self.trajectory.hand_paths.items()
+        }
 
     def terminate(self, new_status: Status) -> None:
         if new_status in (Status.FAILURE, Status.INVALID):

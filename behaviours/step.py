@@ -414,7 +414,7 @@ class Step(RobotBehaviour):
             )
         else:
             return ""
-        return f"{self.name}: the {swing} foot {what}" if last_chance else None
+        return f"the {swing} foot {what}" if last_chance else None
 
     def _watch_landing(self) -> str:
         """Record where the swing foot first touches down; why it fails when off its foothold."""
@@ -426,7 +426,7 @@ class Step(RobotBehaviour):
         if distance <= self.landing_tolerance and turn <= self.landing_yaw_tolerance:
             return ""
         return (
-            f"{self.name}: the {swing} foot landed at {self.landing.describe()}, {distance * 1000:.0f} mm "
+            f"the {swing} foot landed at {self.landing.describe()}, {distance * 1000:.0f} mm "
             f"and {math.degrees(turn):.1f} deg from its planned foothold {target.describe()} (tolerance "
             f"{self.landing_tolerance * 1000:.0f} mm, {math.degrees(self.landing_yaw_tolerance):.0f} deg)"
         )

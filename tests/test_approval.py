@@ -250,7 +250,7 @@ def test_prompt_shows_every_alternative_and_enter_approves_the_recommended() -> 
         "3": "right",
     }
     assert [row[1] for row in rows.values()] == ["*", " ", " "]  # only the recommended row is marked
-    assert rows["2"][4].split() == ["0.0248", "0.0015", "0.0014", "0.0277", "0.5200"]
+    assert rows["2"][4].split() == ["0.0248", "0.0015", "0.0014", "0.0000", "0.0277", "0.5200"]
     assert rows["3"][4] == "infeasible: right hand cannot reach"
     assert decision["decision"] == "approve" and decision["alternative"] == "left_to_right"
     assert decision["by"] == "operator:tester"

@@ -43,7 +43,7 @@ from executive.world.model import build
 
 
 def test_every_verdict_maps_to_one_mode_or_an_explicit_outcome() -> None:
-    assert mode_names() == ("collision", "fall", "drop")
+    assert mode_names() == ("collision", "fall", "drop", "tracking")
     seen = [v for v in verdict_names()]
     assert len(seen) == len(set(seen))  # no verdict counts twice
     assert {v: mode_of_verdict(v) for v in verdict_names()} == {
@@ -52,27 +52,27 @@ def test_every_verdict_maps_to_one_mode_or_an_explicit_outcome() -> None:
         "unstable": "fall",  # a simulation that blew up: the robot is no longer controlled
         "slip": "fall",  # a standing foot slid: the support under the robot moved
         "drop": "drop",
-        "tracking": None,
+        "tracking": "tracking",  # a hand (or foot) ended short of its plan: predicted since issue 27
         "guard": None,
         "task": None,
         "timeout": None,
         "error": None,
     }
-    assert {o.name for o in outcomes()} == {"tracking", "guard", "task", "timeout", "error"}
+    assert {o.name for o in outcomes()} == {"guard", "task", "timeout", "error"}
     assert observed_as("fall") == ("fall", "unstable", "slip") and observed_as("drop") == ("drop",)
+    assert observed_as("tracking") == ("tracking",)
     assert failure_mode("fall").terminal and not failure_mode("drop").terminal
+    assert not failure_mode("tracking").terminal
     with pytest.raises(ExecutiveError, match="valid: collision, fall, unstable, slip, drop, tracking"):
         mode_of_verdict("stalled")
 
 
 def test_a_behaviour_says_its_verdict_and_one_without_a_verdict_did_not_do_its_task() -> None:
     stalled = Release("left.transfer", "left", "book")  # any task-level behaviour
-    assert (
-        stalled.fail("tracking", "left.transfer: hand 37 mm from its planned end")
-        == py_trees.common.Status.FAILURE
-    )
+    assert stalled.fail("tracking", "hand 37 mm from its planned end") == py_trees.common.Status.FAILURE
     failure = behaviour_failure(stalled, 3.5)
-    assert (failure.mode, failure.time) == ("tracking", 3.5) and "37 mm" in failure.detail
+    assert (failure.mode, failure.time) == ("tracking", 3.5)
+    assert failure.detail == "hand 37 mm from its planned end"  # the run's message adds its name, once
     assert behaviour_failure(py_trees.behaviours.Failure("plug-in"), 1.0).mode == "task"
     assert behaviour_failure(None, 1.0).mode == "task"
     bogus = Release("bogus", "left", "book")

@@ -267,7 +267,7 @@ def test_fidelity_end_to_end_in_physics(tmp_path: Path) -> None:
     assert (out / "variant-00" / "trials.jsonl").read_bytes() == first
     summary = json.loads((out / "summary.json").read_text())
     assert summary["complete"] and summary["variants_run"] == 2 and summary["rollouts"] == 0
-    assert set(summary["pooled"]) == {"collision", "fall", "drop", "any"}
+    assert set(summary["pooled"]) == {"collision", "fall", "drop", "tracking", "any"}
     assert {"mean", "significant_above_zero", "pooled", "variants_scored"} <= set(summary["regret"])
     assert summary["wall_s"] > 0
     executed = 0

@@ -239,13 +239,13 @@ SAFETY = [
         "threshold-99",
         put(("risk.threshold", 99)),
         "risk.threshold",
-        "largest expected_loss any alternative can have is 21",
+        "largest expected_loss any alternative can have is 22",
     ),
     Case(
         "threshold-at-max",
-        put(("risk.threshold", 21)),
+        put(("risk.threshold", 22)),
         "risk.threshold",
-        "is 21 (severity collision 3 x largest body-part factor 3",
+        "is 22 (severity collision 3 x largest body-part factor 3",
     ),
     Case(
         "threshold-probability",
@@ -255,21 +255,21 @@ SAFETY = [
     ),
     Case(
         "threshold-weighted-sum",
-        put(("risk.ordering", "weighted_sum"), ("risk.threshold", 4.5)),
+        put(("risk.ordering", "weighted_sum"), ("risk.threshold", 5.5)),
         "risk.threshold",
-        "largest weighted_sum any alternative can have is 4",
+        "largest weighted_sum any alternative can have is 5",
     ),
     Case(
         "threshold-severities",
         put(("risk.severity.fall", 100.0), ("risk.threshold", 500)),
         "risk.threshold",
-        "is 111 (severity collision 3 x largest body-part factor 3 + fall 100 + drop 2)",
+        "is 112 (severity collision 3 x largest body-part factor 3 + fall 100 + drop 2 + tracking 1)",
     ),
     Case(
         "threshold-zero-weights",
         put(
             ("risk.ordering", "weighted_sum"),
-            ("risk.weights", {"collision": 0, "fall": 0, "drop": 0}),
+            ("risk.weights", {"collision": 0, "fall": 0, "drop": 0, "tracking": 0}),
             ("risk.threshold", 0),
         ),
         "risk.threshold",
@@ -753,14 +753,14 @@ ACCEPTED = [
     ("target -2.6e-1", text("to: [0.52, -0.26]", "to: [5.2e-1, -2.6e-1]")),
     ("sigma 1e-2", text("com: 0.01", "com: 1e-2")),
     ("mass at its limit", text("mass: 0.6", "mass: 50")),
-    ("threshold just below the max", text("threshold: 0.3", "threshold: 20.9")),
+    ("threshold just below the max", text("threshold: 0.3", "threshold: 21.9")),
     ("breach obstacle, threshold above 21", lambda source, _tmp: _breach_obstacle(source)),
 ]
 
 
 def _breach_obstacle(source: str) -> str:
     """The bundled file with its stack a breach obstacle of severity 20 and clearance 3 cm, and a
-    threshold (40) only an obstacle's own severity makes reachable (20 x 3 + 10 + 2 = 72)."""
+    threshold (40) only an obstacle's own severity makes reachable (20 x 3 + 10 + 2 + 1 = 73)."""
     own = "      severity: 20.0\n      clearance: 3e-2\n      category: breach\n"
     source = source.replace("      # Optional, per obstacle", own + "      # Optional, per obstacle")
     return source.replace("  threshold: 0.3", "  threshold: 40")

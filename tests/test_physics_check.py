@@ -92,8 +92,12 @@ def test_rollouts_are_seeded_and_fused_with_their_counts() -> None:
     cfg = scenario.risk.rollouts
     w, n = cfg.prior_weight, 3
     drops = first.counts.get("drop", 0)
-    p_a = first.analytic.components["drop"].probability
+    # The prior is the analytic risk as the dry run refined it (its measured end errors and
+    # placement): the rollouts' counts update that.
+    assert first.measured is not None and first.prior is first.measured
+    p_a = first.prior.components["drop"].probability
     assert first.risk.components["drop"].probability == pytest.approx((w * p_a + drops) / (w + n))
+    assert first.measured.components["collision"] is first.analytic.components["collision"]  # no update
 
 
 def test_bad_rollout_settings_are_located() -> None:
@@ -117,7 +121,8 @@ def test_where_the_analytic_models_and_physics_disagree_the_ranking_follows_phys
 
     The analytic models rank the right hand last (its approach leaves the jaws the least room);
     its rollouts in physics have the fewest failures. The counts move every fused estimate from
-    the analytic value towards the observed frequency, and the ranking follows them.
+    its prior (the analytic value as the dry run refined it) towards the observed frequency, and
+    the ranking follows them.
     """
     from executive.decision.physics_check import RolloutPool
 
@@ -144,9 +149,9 @@ def test_where_the_analytic_models_and_physics_disagree_the_ranking_follows_phys
         {n: (dict(r.counts), r.analytic.value(ordering), r.risk.value(ordering)) for n, r in checked.items()}
     )
     assert failures["right"] < min(failures["left"], failures["left_to_right"])  # physics' first
-    for r in checked.values():  # each fused probability lies between the analytic one and k / n
+    for r in checked.values():  # each fused probability lies between its prior and k / n
         for mode, report in r.risk.components.items():
-            p_a, k = r.analytic.components[mode].probability, report.details["failures"]
+            p_a, k = r.prior.components[mode].probability, report.details["failures"]
             low, high = sorted((p_a, k / r.rollouts))
             assert low - 1e-12 <= report.probability <= high + 1e-12
     assert min(checked, key=lambda n: checked[n].risk.value(ordering)) == "right"

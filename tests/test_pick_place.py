@@ -133,7 +133,7 @@ def test_a_pick_with_nothing_in_hand_is_reported_as_a_drop() -> None:
 
 def test_a_places_misplacement_risk_matches_monte_carlo_of_the_measured_grip() -> None:
     """The grip measured from 2 looks of 1 cm per axis lands its error on the target: P(|e| > 2 cm)."""
-    from executive.decision.assessment import _placed_from_hand
+    from executive.decision.drop_model import _placed_from_hand
     from executive.planning.plan import AlternativePlan, Step
     from executive.world.model import Grip
 

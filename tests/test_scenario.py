@@ -51,7 +51,7 @@ def test_bundled_book_transfer_values() -> None:
     assert s.risk.d_safety == 0.05
     assert s.risk.collision.exponent == 2.0
     assert s.risk.fall.circle_radius is None
-    assert s.risk.weights == (("collision", 1.0), ("fall", 2.0), ("drop", 1.0))
+    assert s.risk.weights == (("collision", 1.0), ("fall", 2.0), ("drop", 1.0), ("tracking", 1.0))
     assert dict(s.risk.severity.body_parts) == {"head": 3.0, "hand": 1.5, "forearm": 1.0}
     assert s.risk.ordering == "expected_loss"
     assert s.risk.threshold == 0.3
@@ -158,7 +158,7 @@ def test_partial_risk_blocks_keep_the_other_defaults() -> None:
     data = bundled_dict()
     data["risk"] = {"weights": {"fall": 3.5}, "fall": {"circle_radius": 0.02}, "severity": {"fall": 20}}
     s = scenario.from_dict(data)
-    assert s.risk.weights == (("collision", 1.0), ("fall", 3.5), ("drop", 1.0))
+    assert s.risk.weights == (("collision", 1.0), ("fall", 3.5), ("drop", 1.0), ("tracking", 1.0))
     assert s.risk.fall.circle_radius == 0.02
     assert s.risk.fall.sigmas == 2.0
     assert s.risk.severity.fall == 20.0

@@ -238,7 +238,9 @@ def test_the_side_step_places_the_book_in_physics_and_the_estimate_follows_the_b
     estimate's base where odometry measures it."""
     data = yaml.safe_load(catalog.scenario_path("sidestep_or_handover").read_text())
     data["mission"][0]["transfer"]["alternatives"] = ["left_sidestep"]
-    data["risk"]["threshold"] = 0.5  # its analytic risk, 0.41, within it: headroom for the re-plan
+    # Its risk, 0.50 (0.41 analytic; the dry run measures the book set down 15 mm off after the
+    # walk), within the threshold: headroom for the re-plan.
+    data["risk"]["threshold"] = 0.6
     path = tmp_path / "sidestep.yaml"
     path.write_text(yaml.safe_dump(data))
     scenario = with_rollouts(load(str(path)), 0)
@@ -256,5 +258,5 @@ def test_the_side_step_places_the_book_in_physics_and_the_estimate_follows_the_b
     assert restance["alternative"] == "left_sidestep" and restance["outcome"] == "replanned"
     assert np.all(np.abs(np.array(restance["measured"][:2]) - truth[:2]) < 4 * sigma + 0.005)
     risk = restance["risk"]
-    assert risk["ordering"] == "expected_loss" and risk["now"] <= risk["bound"] == 0.5
+    assert risk["ordering"] == "expected_loss" and risk["now"] <= risk["bound"] == 0.6
     assert risk["now"] == pytest.approx(risk["approved"] + risk["rest_replanned"] - risk["rest_planned"])

@@ -46,7 +46,7 @@ def test_an_override_is_the_value_the_file_would_give(value: float) -> None:
 def test_the_range_ends_just_below_the_orderings_largest_value() -> None:
     scenario = load("book_transfer")
     highest, _ = max_ordering_value(scenario.risk, scenario.scene)
-    assert highest == 21.0  # expected loss: severity collision 3 x body-part factor 3 + fall 10 + drop 2
+    assert highest == 22.0  # expected loss: collision 3 x body-part factor 3 + fall 10 + drop 2 + tracking 1
     below = math.nextafter(highest, 0.0)
     assert with_threshold(scenario, below).risk.threshold == below
     for bad in (highest, highest * 10, -0.01, math.nan, math.inf):
@@ -61,8 +61,8 @@ def test_the_range_ends_just_below_the_orderings_largest_value() -> None:
     [
         ("-0.1", "expected a number >= 0"),
         ("nan", "finite"),
-        ("21", "can never be exceeded"),
-        ("1e9", "below 21"),
+        ("22", "can never be exceeded"),
+        ("1e9", "below 22"),
     ],
 )
 def test_out_of_range_is_exit_2_before_anything_runs(

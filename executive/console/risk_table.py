@@ -90,7 +90,8 @@ def risk_table(rows: Sequence[Mapping[str, Any]], ordering: str, threshold: floa
 
 def physics_table(rows: Sequence[Mapping[str, Any]]) -> str:
     """Markdown: what physics said per alternative: the dry run, and with rollouts the failures
-    counted and per mode ``analytic → fused [credible interval]``. Empty without a check."""
+    counted and per mode ``analytic → fused [credible interval]`` (``analytic → dry run → fused``
+    for a mode the dry run refines). Empty without a check."""
     checked = [r for r in ranked(rows) if r.get("physics")]
     if not checked:
         return ""
@@ -113,13 +114,18 @@ def physics_table(rows: Sequence[Mapping[str, Any]]) -> str:
         line = f"| {row['name']} | {outcome} | {rolled} |"
         if with_rollouts:
             modes = physics.get("modes", {})
-            for m in mode_names():
-                v = modes.get(m)
-                line += (
-                    f" {_short(v['analytic'])} → {_short(v['fused'])} "
-                    f"[{_short(v['interval'][0])}, {_short(v['interval'][1])}] |"
-                    if v
-                    else " - |"
-                )
+            line += "".join(f" {_mode_cell(modes.get(m))} |" for m in mode_names())
         lines.append(line)
     return "\n".join(lines)
+
+
+def _mode_cell(v: Mapping[str, Any] | None) -> str:
+    """One mode's ``analytic → [dry run →] fused [interval]`` (``-``: not checked)."""
+    if not v:
+        return "-"
+    cell = _short(v["analytic"])
+    if "measured" in v:
+        cell += f" → {_short(v['measured'])}"
+    if "fused" in v:
+        cell += f" → {_short(v['fused'])} [{_short(v['interval'][0])}, {_short(v['interval'][1])}]"
+    return cell

@@ -260,13 +260,18 @@ def request_table(request: ApprovalRequest) -> str:
         r = alt.risk
         lines.append(
             f"{mark} {i:>2} {alt.name:<15}"
-            + "".join(f"{r.get(k, float('nan')):>10.4f}" for k in (*mode_names(), "combined"))
-            + f"{r.get('expected_loss', float('nan')):>10.4f}"
+            + "".join(_cell(r.get(k)) for k in (*mode_names(), "combined", "expected_loss"))
         )
         if alt.physics:
             lines.append(f"       {alt.physics}")
     lines.append(f"  * recommended (lowest {request.ordering}); threshold {request.threshold:g}")
     return "\n".join(lines)
+
+
+def _cell(value: float | None) -> str:
+    """One number of the prompt's table; ``-`` where the request has none (a mode registered
+    after the request was built)."""
+    return f"{'-':>10}" if value is None else f"{value:>10.4f}"
 
 
 class TerminalChannel:

@@ -32,8 +32,9 @@ import mujoco
 import numpy as np
 
 from executive.decision.priority import normal_policy_children
+from executive.decision.risk_models import dry_run_update
 from executive.errors import ExecutiveError
-from executive.risk.combine import CombinedRisk
+from executive.risk.combine import CombinedRisk, combine
 from executive.risk.fusion import choice_confidence, fuse, posteriors
 from executive.schema.types import RiskConfig, Scenario, SceneVariation
 
@@ -53,6 +54,7 @@ __all__ = [
     "check_alternatives",
     "estimate_scenario",
     "exit_with_parent",
+    "measured",
     "physics_text",
     "rollout_seed",
     "run_job",
@@ -168,23 +170,34 @@ def run_job(job: RolloutJob) -> dict[str, Any]:
 
 @dataclass
 class PhysicsResult:
-    """What physics said of one alternative: its dry run, its rollouts, the fused risk."""
+    """What physics said of one alternative: its dry run, its rollouts, the fused risk.
+
+    ``measured``: the analytic risk with what the dry run measured (the modes with a dry-run
+    update, :func:`executive.decision.risk_models.register_dry_run_update`); None when no mode
+    has one. It is the prior the rollouts update.
+    """
 
     alternative: str
     dry_run: dict[str, Any]
     analytic: CombinedRisk
     counts: Counter[str] = field(default_factory=Counter)  # outcome -> rollouts
     rollouts: int = 0
-    fused: CombinedRisk | None = None  # None: no rollouts ran (the analytic risk stands)
+    fused: CombinedRisk | None = None  # None: no rollouts ran (the prior stands)
+    measured: CombinedRisk | None = None
 
     @property
     def dry_run_ok(self) -> bool:
         return bool(self.dry_run.get("outcome") == "success")
 
     @property
+    def prior(self) -> CombinedRisk:
+        """The risk before the rollouts: the analytic one with what the dry run measured."""
+        return self.measured if self.measured is not None else self.analytic
+
+    @property
     def risk(self) -> CombinedRisk:
-        """The risk the selector ranks by: fused when rollouts ran, else analytic."""
-        return self.fused if self.fused is not None else self.analytic
+        """The risk the selector ranks by: fused when rollouts ran, else the prior."""
+        return self.fused if self.fused is not None else self.prior
 
     def dry_run_reason(self) -> str:
         failure = self.dry_run.get("failure") or {}
@@ -206,6 +219,12 @@ class PhysicsResult:
                 }
             out["modes"] = modes
             out["confidence"] = confidence
+        if self.measured is not None:
+            for mode, report in self.measured.components.items():
+                if report is not self.analytic.components[mode]:
+                    entry = out.setdefault("modes", {}).setdefault(mode, {})
+                    entry.setdefault("analytic", self.analytic.components[mode].probability)
+                    entry["measured"] = report.probability
         return out
 
 
@@ -278,7 +297,9 @@ def check_alternatives(
     t0 = clock()
     dry = [RolloutJob(scenario, plan, None, q_start) for plan in plans.values()]
     results = {
-        name: PhysicsResult(name, record, analytic[name])
+        name: PhysicsResult(
+            name, record, analytic[name], measured=measured(analytic[name], record, scenario.risk)
+        )
         for name, record in zip(plans, run_map(dry), strict=True)
     }
     verdict = PhysicsVerdict(results, dry_run_s=clock() - t0)
@@ -292,8 +313,22 @@ def check_alternatives(
     for name in alive:
         r = results[name]
         cfg = scenario.risk.rollouts
-        r.fused = fuse(r.analytic, r.counts, r.rollouts, cfg.prior_weight, cfg.confidence, scenario.risk)
+        r.fused = fuse(r.prior, r.counts, r.rollouts, cfg.prior_weight, cfg.confidence, scenario.risk)
     return verdict
+
+
+def measured(analytic: CombinedRisk, record: Mapping[str, Any], config: RiskConfig) -> CombinedRisk | None:
+    """``analytic`` with each mode's dry-run update applied to the dry run's ``record`` (None: no
+    mode has one, or the run failed: an alternative that fails its dry run is not run)."""
+    if record.get("outcome") != "success":
+        return None
+    reports, changed = [], False
+    for mode, report in analytic.components.items():
+        update = dry_run_update(mode)
+        refined = update(report, record) if update is not None else report
+        changed |= refined is not report
+        reports.append(refined)
+    return combine(reports, config, analytic.duration_s) if changed else None
 
 
 def _roll_out(
@@ -338,8 +373,7 @@ def _choice(
         return 1.0, 0.0
     cfg = risk.rollouts
     candidates = {
-        p.name: posteriors(results[p.name].analytic, results[p.name].counts, n, cfg.prior_weight)
-        for p in plans
+        p.name: posteriors(results[p.name].prior, results[p.name].counts, n, cfg.prior_weight) for p in plans
     }
     offsets = {p.name: results[p.name].analytic.time_loss for p in plans}
     choice = choice_confidence(candidates, risk.ordering, cfg.indifference, seed=n, offsets=offsets)

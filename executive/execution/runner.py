@@ -34,6 +34,7 @@ from executive.world.observation import SimulatedSensor
 __all__ = [
     "RunResult",
     "behaviour_failure",
+    "end_errors",
     "error_fields",
     "execute_plan",
     "outcome_fields",
@@ -60,6 +61,10 @@ class RunResult:
     max_tick_s: float = 0.0
     statuses: list[str] = field(default_factory=list)  # root status after each tick, run-length encoded
     placement_error_m: float | None = None
+    placement_offset: tuple[float, float] | None = None  # where the object rests less its target (x, y; m)
+    behaviour: str = ""  # the behaviour that failed (its message is the failure's detail)
+    #: per move that ended, per hand: where its site ended less its planned end (m, world frame)
+    end_errors: dict[str, dict[str, list[float]]] = field(default_factory=dict)
     restances: list[dict[str, Any]] = field(default_factory=list)  # re-plans after walks (their log records)
 
     @property
@@ -121,6 +126,7 @@ def execute_plan(
             break
         robot.advance()
     result.wall_s = time.perf_counter() - start
+    result.end_errors = end_errors(root)
     result.physics_wall_s = robot.stats.physics_wall_s
     result.sim_time_s = float(truth.data.time)
     result.restances = [n.record for n in root.iterate() if isinstance(n, Restance) and n.record is not None]
@@ -130,6 +136,7 @@ def execute_plan(
         tip = root.tip()
         feedback = tip.feedback_message if tip else ""
         result.failure = robot.failure or behaviour_failure(tip, float(truth.data.time))
+        result.behaviour = tip.name if tip else ""
         result.outcome = "failed"
         result.message = f"{tip.name if tip else plan.name}: {feedback}"
     else:
@@ -138,6 +145,17 @@ def execute_plan(
         result.message = f"not finished after {limit:.1f} s of simulated time"
     tree.shutdown()
     return result
+
+
+def end_errors(root: py_trees.behaviour.Behaviour) -> dict[str, dict[str, list[float]]]:
+    """Per hand move of ``root``'s tree that ended, per hand, its end error (executed less
+    planned, m): what the moves measured of their tracking (:attr:`MoveHand.end_error`)."""
+    out: dict[str, dict[str, list[float]]] = {}
+    for behaviour in root.iterate():
+        error = getattr(behaviour, "end_error", None)
+        if error is not None:
+            out[behaviour.name] = {side: [round(float(v), 6) for v in e] for side, e in error.items()}
+    return out
 
 
 def hold_from_start(robot: SimulatedRobot, held: dict[str, str]) -> None:
@@ -163,6 +181,7 @@ def _verify(result: RunResult, task: Task, truth: World, detector: FailureDetect
     if to is not None and task.object:
         pos = truth.data.xpos[truth.ids.object_bodies[task.object]]
         result.placement_error_m = float(np.hypot(pos[0] - to[0], pos[1] - to[1]))
+        result.placement_offset = (float(pos[0] - to[0]), float(pos[1] - to[1]))
     if verdict is None or verdict.ok:
         done = (
             f"{task.object} placed at the target" if verdict is not None and verdict.event == "placed" else ""
@@ -179,7 +198,8 @@ def behaviour_failure(behaviour: py_trees.behaviour.Behaviour | None, time_s: fl
     The verdict is one of the failure-mode table's (:mod:`executive.schema.failure_modes`):
     ``drop`` (a grasp that holds nothing), ``tracking`` (a hand stalled short of its plan),
     ``guard``, ``task`` (a press whose force was not reached). A behaviour that fails without
-    one did not do its task: ``task``.
+    one did not do its task: ``task``. The detail is the behaviour's message (which does not
+    repeat its own name: the run's message and record name the behaviour once).
 
     Raises:
         ExecutiveError: the verdict is not in the table.
@@ -231,14 +251,19 @@ def error_fields(exc: BaseException) -> dict[str, Any]:
 
 
 def outcome_fields(result: RunResult) -> dict[str, Any]:
-    """What a physics run's record says of its outcome: outcome, failure, sim time, placement error.
+    """What a physics run's record says of its outcome: outcome, failure, sim time, placement error,
+    and the moves' end errors (``end_errors``, :func:`end_errors`).
 
     ``outcome`` is ``success``, ``timeout`` or the verdict of the failure (a detector's or a
     behaviour's; ``task`` when the run failed without one).
     """
     out: dict[str, Any] = {"sim_time_s": round(result.sim_time_s, 6)}
+    if result.end_errors:
+        out["end_errors"] = result.end_errors
     if result.placement_error_m is not None:
         out["placement_error_m"] = round(result.placement_error_m, 6)
+    if result.placement_offset is not None:
+        out["placement_offset"] = [round(v, 6) for v in result.placement_offset]
     if result.restances:
         out["restance"] = result.restances
     if result.outcome == "success":
@@ -252,6 +277,7 @@ def outcome_fields(result: RunResult) -> dict[str, Any]:
         out["outcome"] = mode
         out["failure"] = {
             "mode": mode,
+            "behaviour": result.behaviour,
             "detail": failure.detail if failure is not None else result.message,
             "time": round(failure.time, 6) if failure is not None else None,
             "bodies": list(failure.bodies) if failure is not None else [],

@@ -17,9 +17,13 @@ from executive.planning.planner import HandTarget, Trajectory
 from executive.planning.stepping import StepPlan
 from executive.schema.types import Task
 
-__all__ = ["AlternativePlan", "CompositionConfig", "Step", "StepKind", "held_at_start"]
+__all__ = ["MOVE_TOLERANCE", "AlternativePlan", "CompositionConfig", "Step", "StepKind", "held_at_start"]
 
 FloatArray = NDArray[np.float64]
+
+#: m: how far a hand may end a move from its planned end before the move fails with ``tracking``
+#: (the tolerance of :class:`behaviours.move_hand.MoveHand`, which the tracking model predicts against).
+MOVE_TOLERANCE = 0.03
 StepKind = Literal[
     "move", "lift", "carry", "place", "retreat", "home", "grasp", "release", "push", "press", "step"
 ]

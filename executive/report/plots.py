@@ -115,15 +115,23 @@ def risk_table(
 
 
 def _fused_text(physics: dict[str, Any]) -> str:
-    """``; P(collision) analytic 0.051 -> fused 0.049 [0.010, 0.120], ...`` when rollouts ran."""
+    """``; analytic->fused collision 0.051->0.049 [0.010, 0.120], ...`` when rollouts ran; a mode
+    a dry run refines shows its refined value between (``analytic->dry run->fused``)."""
     modes = physics.get("modes")
     if not modes:
         return ""
-    parts = [
-        f"{m} {v['analytic']:.3f}->{v['fused']:.3f} [{v['interval'][0]:.3f}, {v['interval'][1]:.3f}]"
-        for m, v in modes.items()
-    ]
-    return "; analytic->fused " + ", ".join(parts)
+    parts = []
+    for m, v in modes.items():
+        chain = f"{v['analytic']:.3f}"
+        if "measured" in v:
+            chain += f"->{v['measured']:.3f}"
+        if "fused" in v:
+            chain += f"->{v['fused']:.3f} [{v['interval'][0]:.3f}, {v['interval'][1]:.3f}]"
+        parts.append(f"{m} {chain}")
+    stages = ["analytic"]
+    stages += ["dry run"] if any("measured" in v for v in modes.values()) else []
+    stages += ["fused"] if any("fused" in v for v in modes.values()) else []
+    return f"; {'->'.join(stages)} " + ", ".join(parts)
 
 
 def risk_json(scenario: Scenario, tasks: Sequence[tuple[str, Sequence[AlternativeRisk]]]) -> str:

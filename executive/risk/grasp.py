@@ -94,6 +94,9 @@ def assess_grasp(
     tolerance: GraspTolerance | None = None,
     closing_axis_object: ArrayLike = (0.0, 1.0, 0.0),
     approach: ApproachEnvelope | None = None,
+    hand: tuple[float, float] = (0.0, 0.0),
+    hand_sigma: float = 0.0,
+    lateral_probability: float | None = None,
 ) -> RiskReport:
     """Grasp risk of closing the ``side`` hand at ``hand_pose`` (site position, 3x3 rotation) on ``obj``.
 
@@ -108,14 +111,22 @@ def assess_grasp(
     approach: the hand's path down to the grasp (:func:`approach_envelope`). Given, the
     closing and yaw tolerances are replaced by the joint event that a hand geom meets the
     object's side anywhere on that path (:func:`approach_miss_probability`, offset and yaw
-    together); its union with the lateral failure is taken as independent.
+    together); its union with the lateral failure is taken as independent. ``hand`` and
+    ``hand_sigma``: the hand's execution error along the envelope's closing and lateral axes
+    (mean, m) and its spread per axis (:func:`approach_miss_probability`).
+
+    lateral_probability: the lateral failure's probability when the caller has it (a grasp
+    whose placement adds the execution's spread, :mod:`executive.risk.placement_spread`);
+    None: from ``tolerance.lateral``.
     """
     err = _object_error(world, obj, hand_pose, object_pose, closing_axis_object)
     tol = tolerance or grasp_tolerance(world, side, obj, closing_axis_object=closing_axis_object)
     p_axes = tolerance_probabilities(err, tol, uncertainty.object_position, uncertainty.object_yaw_rad)
+    if lateral_probability is not None:
+        p_axes[1] = lateral_probability
     extra: dict[str, float] = {}
     if approach is not None:
-        p_axes, extra = _with_approach(approach, p_axes, uncertainty)
+        p_axes, extra = _with_approach(approach, p_axes, uncertainty, hand, hand_sigma)
     lower, upper = union_bounds(p_axes)
     cfg = risk_config.grasp
     return RiskReport(
@@ -157,12 +168,16 @@ def _object_error(
 
 
 def _with_approach(
-    approach: ApproachEnvelope, p_axes: FloatArray, uncertainty: Uncertainty
+    approach: ApproachEnvelope,
+    p_axes: FloatArray,
+    uncertainty: Uncertainty,
+    hand: tuple[float, float] = (0.0, 0.0),
+    hand_sigma: float = 0.0,
 ) -> tuple[FloatArray, dict[str, float]]:
     """The failure probabilities with the approach's miss probability in place of the closing
     and yaw ones ([approach, lateral]), and the approach's details for the report."""
     p_jaws, p_a, p_b = approach_miss_probability(
-        approach, uncertainty.object_position, uncertainty.object_yaw_rad
+        approach, uncertainty.object_position, uncertainty.object_yaw_rad, hand=hand, hand_sigma=hand_sigma
     )
     hi, lo = approach.clearances(0.0)
     extra = {"p_approach": p_jaws, "p_approach_a": p_a, "p_approach_b": p_b}

@@ -148,7 +148,13 @@ def approach_envelope(
 
 
 def approach_miss_probability(
-    envelope: ApproachEnvelope, position_sigma: float, yaw_sigma: float, order: int = 32
+    envelope: ApproachEnvelope,
+    position_sigma: float,
+    yaw_sigma: float,
+    order: int = 32,
+    *,
+    hand: tuple[float, float] = (0.0, 0.0),
+    hand_sigma: float = 0.0,
 ) -> tuple[float, float, float]:
     """P(a hand geom meets the object's side on the way down) for a Gaussian object pose error.
 
@@ -159,18 +165,28 @@ def approach_miss_probability(
     of ``order`` nodes. Valid while the pads pass beside the object's long faces (the yaw
     does not bring a face's end under them).
 
+    ``hand``: the hand's mean execution error (m) along the envelope's closing (y) and lateral
+    (x) axes, ``hand_sigma`` its spread per axis (the tracking model's,
+    :mod:`executive.risk.tracking`): the hand's geoms move with it, so what counts is the
+    object's offset from the hand, ``u' = (c - h_c) - (l - h_l) tan t``, of mean
+    ``-h_c + h_l tan t`` and variance ``(position_sigma^2 + hand_sigma^2) / cos^2 t``.
+
     Returns:
         (probability, p_a, p_b): the total and the parts from the +y and -y faces.
     """
-    if position_sigma < 0.0 or yaw_sigma < 0.0:
-        raise ValueError(f"approach_miss_probability: sigmas must be >= 0, got {position_sigma}, {yaw_sigma}")
+    if position_sigma < 0.0 or yaw_sigma < 0.0 or hand_sigma < 0.0:
+        raise ValueError(
+            f"approach_miss_probability: sigmas must be >= 0, got {position_sigma}, {yaw_sigma}, {hand_sigma}"
+        )
     z, w = gauss_hermite_normal(order) if yaw_sigma > 0.0 else (np.zeros(1), np.ones(1))
     t = np.clip(yaw_sigma * z, -1.5, 1.5)
     hi, lo = envelope.clearances(t)
-    if position_sigma > 0.0:
-        s = position_sigma / np.cos(t)
-        p_a, p_b = normal_cdf(-hi / s), normal_cdf(lo / s)
+    mean = -hand[0] + hand[1] * np.tan(t)
+    sigma = float(np.hypot(position_sigma, hand_sigma)) if hand_sigma > 0.0 else position_sigma
+    if sigma > 0.0:
+        s = sigma / np.cos(t)
+        p_a, p_b = normal_cdf((mean - hi) / s), normal_cdf((lo - mean) / s)
     else:
-        p_a, p_b = (hi <= 0.0).astype(float), (lo >= 0.0).astype(float)
+        p_a, p_b = (hi <= mean).astype(float), (lo >= mean).astype(float)
     p = np.where(lo >= hi, 1.0, np.minimum(1.0, p_a + p_b))
     return float(w @ p), float(w @ p_a), float(w @ p_b)

@@ -1,14 +1,13 @@
 """The failure modes: one table that everything listing a mode reads.
 
 A failure mode is a way an alternative can fail that a risk model predicts and a
-detector observes: ``collision``, ``fall`` (its verdicts: ``fall``, ``unstable``, ``slip``)
-and ``drop``. Each :class:`FailureMode` says
-which detector and behaviour verdicts count as it, its severity and seed weight
-defaults (the scenario's ``risk.severity`` and ``risk.weights`` keys are the mode's
-name), whether it ends a task at once, and its labels in tables. Verdicts that are no
-risk mode (a timeout, a task's own goal not met, a hand that stalled short of its plan,
-a defect) are :class:`Outcome` rows of the same table, so every verdict lands somewhere
-explicit.
+detector or behaviour observes: ``collision``, ``fall`` (its verdicts: ``fall``,
+``unstable``, ``slip``), ``drop`` and ``tracking``. Each :class:`FailureMode` says which
+detector and behaviour verdicts count as it, its severity and seed weight defaults (the
+scenario's ``risk.severity`` and ``risk.weights`` keys are the mode's name), whether it ends
+a task at once, and its labels in tables. Verdicts that are no risk mode (a timeout, a task's
+own goal not met, a guard's stop, a defect) are :class:`Outcome` rows of the same table, so
+every verdict lands somewhere explicit.
 
 Adding a mode is one :func:`register_mode` call plus its risk model
 (:func:`executive.decision.risk_models.register_model`) and, if physics can observe it,
@@ -220,8 +219,16 @@ register_mode(
         description="the object is not grasped, slips from the hand, falls, or is set down off its target",
     )
 )
-_register_outcome(
-    Outcome("tracking", "track", "a hand stalled short of its planned end (no model predicts it)")
+register_mode(
+    FailureMode(
+        "tracking",
+        "tracking",
+        "track",
+        verdicts=("tracking",),
+        severity=1.0,
+        weight=1.0,
+        description="a hand ends a move (or a foot a step) farther from its planned end than the move allows",
+    )
 )
 _register_outcome(
     Outcome("guard", "guard", "a live guard stopped the motion before a limit was crossed (the robot holds)")

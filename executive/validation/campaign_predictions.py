@@ -103,7 +103,7 @@ def check_predictions(
             continue
         risk, ordering = result.risk, scenario.risk.ordering
         analytic = None
-        if result.fused is not None:
+        if result.risk is not result.analytic:  # fused with rollouts, or refined by the dry run
             analytic = {**result.analytic.as_dict(), "value": result.analytic.value(ordering)}
         out[name] = dataclasses.replace(
             out[name], risk=risk.as_dict(), value=risk.value(ordering), physics=physics, analytic=analytic

@@ -136,8 +136,13 @@ def decision_scores(records: Sequence[dict[str, Any]]) -> dict[str, Any]:
 
 
 def forecasts(executed: Sequence[dict[str, Any]]) -> Iterator[tuple[str, str, FloatArray, BoolArray]]:
-    """Per failure mode (and "any"): the predicting key, its probabilities and the 0/1 outcomes."""
+    """Per failure mode (and "any"): the predicting key, its probabilities and the 0/1 outcomes.
+
+    A mode some record does not predict (a campaign recorded before the mode was in the table)
+    is left out."""
     for mode, key in _forecasts_by_mode().items():
+        if any(key not in r["predicted"] for r in executed):
+            continue
         p = np.array([r["predicted"][key] for r in executed], dtype=float)
         verdicts = () if mode == "any" else failure_mode(mode).verdicts
         y = np.array(
@@ -256,6 +261,7 @@ def _alternative_summary(
     predicted: dict[str, float | None] = {}
     if mine:
         keys = (*mode_names(), "combined", "weighted_sum", "expected_loss")
+        keys = tuple(k for k in keys if all(k in r["predicted"] for r in mine))  # older records: fewer modes
         predicted = {k: float(np.mean([r["predicted"][k] for r in mine])) for k in keys}
         # the number the selector ranked by (fused with the rollouts when they ran)
         # (None: the executive would never run it, its dry run failed)

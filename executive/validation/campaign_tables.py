@@ -79,7 +79,7 @@ def _cells(a: dict[str, Any]) -> list[str]:
     if not a["trials"]:
         return [a["name"], "0", f"infeasible: {a['error'][:80]}"]
     p, f = a["predicted"], a["failure_rate_by_mode"]
-    predicted = [f"{p[k]:.4f}" for k in (*mode_names(), "combined", "expected_loss")]
+    predicted = [f"{p[k]:.4f}" if k in p else "-" for k in (*mode_names(), "combined", "expected_loss")]
     observed = [_pct(f[m]) for m in observed_outcomes()]
     return [
         a["name"],

@@ -100,9 +100,9 @@ def run_trial(
     truth world of its perturbation (object and obstacle poses, object mass, friction, the
     robot's CoM offset) and executes the plan in physics with the alternative forced (no
     selection, no approval, no live guards: the question is what the plan does, not whether a
-    guard would stop it). Outcome: ``success``, or the detectors' failure mode ``collision``,
-    ``fall``, ``drop``, ``unstable``, or a verdict no mode predicts (``tracking``, ``task``,
-    ``timeout``: not finished in the time limit; :mod:`executive.schema.failure_modes`);
+    guard would stop it). Outcome: ``success``, or a failure's verdict (``collision``, ``fall``,
+    ``unstable``, ``slip``, ``drop``, ``tracking``), or a verdict no mode predicts (``guard``,
+    ``task``, ``timeout``: not finished in the time limit; :mod:`executive.schema.failure_modes`);
     ``infeasible`` when the alternative does not plan (nothing is executed) and ``error`` when
     the trial's code raised (a defect; counted, never hidden). What follows a walk inside the
     plan is re-planned from the stance the robot measures (its odometry seeded by the trial),
