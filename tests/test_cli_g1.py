@@ -63,12 +63,27 @@ def test_run_completes(g1_scenario_yaml: str, tmp_path: Path) -> None:
     """The mission completes on a truth sampled from the scenario's uncertainty, live guards on
     (the fixture's book is 5 cm thick: a 4 cm one is refused before planning, the Dex3's closed
     fingers reaching 2.5 cm below the grasp point). Only ``left``, the alternative the full
-    scene chooses (expected loss 0.15, below the threshold): the plan test above ranks them all."""
+    scene chooses: the plan test above ranks them all. Without rollouts its expected loss is the
+    dry run's (0.32: the book set down 11 mm off its target), above the scenario's threshold 0.3,
+    so the command line raises the threshold to run it instead of asking."""
     doc = yaml.safe_load(g1_scenario_yaml)
     doc["mission"][0]["transfer"]["alternatives"] = ["left"]
     path = tmp_path / "g1_book.yaml"
     path.write_text(yaml.safe_dump(doc, sort_keys=False))
-    out = _ok(_cli("run", str(path), "--seed", "1", "--rollouts", "0", "--out", str(tmp_path / "run")))
+    out = _ok(
+        _cli(
+            "run",
+            str(path),
+            "--seed",
+            "1",
+            "--rollouts",
+            "0",
+            "--threshold",
+            "0.5",
+            "--out",
+            str(tmp_path / "run"),
+        )
+    )
     assert "outcome   success" in out, out
 
 
