@@ -19,6 +19,9 @@ REPO = Path(__file__).resolve().parents[1]
 # ../shared beside the checkout (CI clones main with shared/ beside it).
 G1_DIR = REPO.parent / "shared" / "robots" / "unitree_g1"
 G1_MJCF = G1_DIR / "g1_with_hands.xml"
+#: s: a subprocess that has not finished a run or shown a prompt by then is hung, on any machine
+#: (a safety net, not a measure: a loaded 2-core machine ran a 10 s run for over 120 s).
+HANG_S = 900.0
 
 
 def g1_floor_yaml(mjcf: Path, com: float | None = None) -> str:

@@ -28,6 +28,7 @@ from executive.decision.approval import (
 )
 from executive.decision.audit import now_iso
 from executive.schema.catalog import scenario_path
+from tests.conftest import HANG_S
 
 DRIVER = Path(__file__).with_name("approval_driver.py")
 PROMPT = TerminalChannel.PROMPT
@@ -331,7 +332,7 @@ def test_executive_run_prompts_on_a_terminal_and_the_operator_aborts(tmp_path: P
         term.type("what")
         term.expect("not understood", timeout=30)
         term.type("q")
-        term.expect("run folder", timeout=120)
+        term.expect("run folder", timeout=HANG_S)
     finally:
         code = term.close()
     assert code == 1

@@ -35,6 +35,7 @@ from executive.console.server import ConsoleError
 from executive.decision.approval import AlternativeRisk, ApprovalRequest, PendingApproval
 from executive.scenario import load
 from executive.world.model import build
+from tests.conftest import HANG_S
 
 REQUEST = ApprovalRequest(
     task="task0: transfer book",
@@ -388,7 +389,7 @@ def test_executive_run_console_serves_the_page_while_it_plans(tmp_path: Path) ->
         url = first.split()[1]
         with urllib.request.urlopen(url, timeout=10) as page:
             assert page.status == 200 and b"<html" in page.read(2000).lower()
-        rest, _ = proc.communicate(timeout=120)
+        rest, _ = proc.communicate(timeout=HANG_S)
         assert "policy:deny" in rest
     finally:
         proc.kill()

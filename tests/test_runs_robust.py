@@ -30,6 +30,7 @@ from executive.cli.main import main
 from executive.decision.approval import TerminalChannel
 from executive.decision.audit import AuditLog, RunFolderError
 from executive.schema.catalog import scenario_path
+from tests.conftest import HANG_S
 
 SCRIPT = Path(sys.executable).parent / "executive"
 CMD = [str(SCRIPT)] if SCRIPT.exists() else [sys.executable, "-m", "executive.cli.main"]
@@ -158,7 +159,7 @@ def _prompted(
     scenario = _scenario(tmp_path, alternatives=alternatives, timeout_s=timeout_s, name=name)
     term = Pty([*CMD, "run", str(scenario), "--approve", "prompt", "--exact", "--out", str(out)])
     try:
-        term.expect(PROMPT, timeout=120)
+        term.expect(PROMPT, timeout=HANG_S)
     except BaseException:
         term.kill()
         raise
@@ -307,14 +308,14 @@ def test_two_runs_started_on_one_folder_one_is_refused(tmp_path: Path) -> None:
         subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
         for _ in range(2)
     ]
-    results = [(p.wait(timeout=120), *p.communicate()) for p in procs]
+    results = [(p.wait(timeout=HANG_S), *p.communicate()) for p in procs]
     codes = sorted(code for code, _, _ in results)
     assert codes == [1, 2], results  # one run (denied: exit 1), one refused (exit 2)
     refused = next(err for code, _, err in results if code == 2)
     assert f"run folder {out} is already used by another run" in refused and "Traceback" not in refused
     entries = _one_run(out)
     assert [e["kind"] for e in entries].count("run") == 1 and entries[-1]["kind"] == "end"
-    again = subprocess.run(argv, capture_output=True, text=True, env=ENV, timeout=120)
+    again = subprocess.run(argv, capture_output=True, text=True, env=ENV, timeout=HANG_S)
     assert again.returncode == 2 and "already used by another run" in again.stderr
     assert "Traceback" not in again.stderr and _lines(out) == entries  # nothing appended
 

@@ -30,6 +30,7 @@ from executive.cli.main import main
 from executive.cli.signals import Terminated, interrupts_held, stop_signals_as_interrupt
 from executive.schema.catalog import scenario_path
 from executive.validation.worker_limit import WORKER_BYTES, Capacity, capacity, check_jobs, max_workers
+from tests.conftest import HANG_S
 
 REPO = Path(__file__).resolve().parents[1]
 CMD = [sys.executable, "-m", "executive.cli.main"]
@@ -134,7 +135,7 @@ def _start(argv: Sequence[str]) -> subprocess.Popen[str]:
 
 def _finish(proc: subprocess.Popen[str]) -> tuple[int, str, str]:
     try:
-        out, err = proc.communicate(timeout=120)
+        out, err = proc.communicate(timeout=HANG_S)
     finally:
         if proc.poll() is None:
             os.killpg(proc.pid, signal.SIGKILL)
@@ -226,7 +227,7 @@ def test_a_stop_signal_at_the_prompt_answers_abort(tmp_path: Path, how: str) -> 
     argv = [*CMD, "run", str(scenario), "--approve", "prompt", "--exact", "--out", str(out)]
     term = Pty(["/usr/bin/env", f"PYTHONPATH={ENV['PYTHONPATH']}", *argv])
     with term:
-        term.expect(PROMPT, timeout=120)
+        term.expect(PROMPT, timeout=HANG_S)
         if how == "SIGTERM":
             os.kill(term.pid, signal.SIGTERM)
             code = term.close()

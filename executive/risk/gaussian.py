@@ -7,6 +7,8 @@ Sources (one line each):
 - Monte Carlo standard error of a proportion: sqrt(p (1 - p) / n).
 - Gauss-Hermite rule: E[f(X)], X ~ N(mu, s^2) = sum_k w_k f(mu + sqrt 2 s x_k) / sqrt(pi)
   (Abramowitz & Stegun 25.4.46).
+- P(|mu + e| > t), e ~ N(0, s^2 I_k): the non-central chi-square tail with k degrees of freedom
+  and non-centrality |mu|^2 / s^2 at (t / s)^2 (Johnson, Kotz & Balakrishnan, 1995, ch. 29).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from scipy.special import ndtr
 
 __all__ = [
     "McEstimate",
+    "ball_exceed_probability",
     "exceed_probability",
     "gauss_hermite_normal",
     "independent_union",
@@ -78,3 +81,11 @@ def gauss_hermite_normal(order: int) -> tuple[FloatArray, FloatArray]:
     """Nodes and weights for E[f(Z)], Z ~ N(0, 1): E ~ sum w_k f(z_k), sum w_k = 1."""
     x, w = np.polynomial.hermite.hermgauss(order)
     return np.sqrt(2.0) * x, w / np.sqrt(np.pi)
+
+
+def ball_exceed_probability(distance: ArrayLike, sigma: float, tolerance: float, dims: int) -> FloatArray:
+    """P(|mu + e| > tolerance) for e ~ N(0, sigma^2 I_dims), per ``distance`` = |mu| (sigma > 0)."""
+    from scipy import stats  # here: slow to import, and the rollout processes never need it
+
+    d = np.asarray(distance, dtype=float)
+    return np.asarray(stats.ncx2.sf((tolerance / sigma) ** 2, dims, (d / sigma) ** 2), dtype=float)

@@ -28,9 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
-from executive.risk.gaussian import exceed_probability, normal_cdf
+from executive.risk.gaussian import ball_exceed_probability, exceed_probability, normal_cdf
 from executive.risk.pinch import placement_tolerance
 
 __all__ = [
@@ -175,7 +174,7 @@ def _misplaced(centre: FloatArray, sigma: float, tolerance: float) -> FloatArray
     distance = np.linalg.norm(np.atleast_2d(centre), axis=-1)
     if sigma == 0.0:
         return (distance > tolerance).astype(float)
-    return np.asarray(stats.ncx2.sf((tolerance / sigma) ** 2, 2, (distance / sigma) ** 2), dtype=float)
+    return ball_exceed_probability(distance, sigma, tolerance, 2)
 
 
 def gaussian_exceed(mean: FloatArray, sigma: float, tolerance: float) -> float:

@@ -38,11 +38,10 @@ from dataclasses import dataclass, replace
 import mujoco
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 
 from executive.planning.plan import MOVE_TOLERANCE, AlternativePlan, Step
 from executive.planning.timing import Trajectory
-from executive.risk.gaussian import gauss_hermite_normal
+from executive.risk.gaussian import ball_exceed_probability, gauss_hermite_normal
 from executive.risk.report import RiskReport
 from executive.risk.servo import Hold, ServoSet
 from executive.world.model import World
@@ -194,7 +193,7 @@ def _mass_nodes(mass: float, sigma: float, order: int) -> tuple[FloatArray, Floa
 def _beyond(distance: FloatArray, sigma: float, tolerance: float) -> FloatArray:
     """P(|mu + e| > tolerance) for e ~ N(0, sigma^2 I_3) and |mu| = ``distance``: the non-central
     chi-square tail with 3 degrees of freedom (Johnson, Kotz & Balakrishnan, 1995, ch. 29)."""
-    return np.asarray(stats.ncx2.sf((tolerance / sigma) ** 2, 3, (distance / sigma) ** 2), dtype=float)
+    return ball_exceed_probability(distance, sigma, tolerance, 3)
 
 
 def predict_tracking(
