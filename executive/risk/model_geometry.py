@@ -16,6 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.world.model import World
+from executive.world.scratch import scratch_data
 
 __all__ = ["body_half_extent", "geom_corners", "geom_points", "half_extent", "site_pose_at"]
 
@@ -74,8 +75,8 @@ def site_pose_at(world: World, qpos: FloatArray, side: str) -> tuple[FloatArray,
     Returns:
         (position (3,), rotation (3, 3) with columns the site's x, y, z axes).
     """
-    data = mujoco.MjData(world.model)
-    data.qpos[:] = qpos
-    mujoco.mj_kinematics(world.model, data)
-    site = world.ids.hand_sites[side]
-    return data.site_xpos[site].copy(), data.site_xmat[site].reshape(3, 3).copy()
+    with scratch_data(world.model) as data:
+        data.qpos[:] = qpos
+        mujoco.mj_kinematics(world.model, data)
+        site = world.ids.hand_sites[side]
+        return data.site_xpos[site].copy(), data.site_xmat[site].reshape(3, 3).copy()
