@@ -11,12 +11,14 @@ Measures, in one run (issue #4, "Speed"; issue #31, item 2):
    model's broad phase sent to coal at those knots, target within 2x;
 3. with ``--against TREE`` (another checkout of the project, e.g. main's), the same planning plus
    risk of that tree's code and of this one, measured in alternating processes of one run
-   (``--rounds``), and their ratio: a before/after that holds on a noisy machine.
+   (``--rounds``), and their ratio: a before/after that holds on a noisy machine;
+4. with ``--profile N``, instead: cProfile's N top entries of one planning + risk of all
+   alternatives (after a warm-up), by cumulative and by own time (docs/performance.md).
 
 Times are CPU seconds of the measuring process (``time.process_time``, best of the repeats): other
 work on a shared machine inflates them less than wall time (also printed for the total). Ratios
 divide times measured in the same run. Prints the targets next to the measured values; does not
-assert. Run: ``python benchmarks/bench_planning.py [repeats] [--against TREE [--rounds R]]``
+assert. Run: ``python benchmarks/bench_planning.py [repeats] [--against TREE [--rounds R]] [--profile N]``
 """
 
 from __future__ import annotations
@@ -27,7 +29,9 @@ os.environ.setdefault("OMP_NUM_THREADS", "1")  # one core: no BLAS threads
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse
+import cProfile
 import json
+import pstats
 import subprocess
 import sys
 import time
@@ -163,12 +167,28 @@ def against(tree: Path, rounds: int, repeats: int) -> None:
     )
 
 
+def profile(top: int) -> None:
+    """cProfile's ``top`` entries of one planning + risk of all alternatives (after a warm-up)."""
+    world = build(load("book_transfer"))
+    task = world.scenario.mission[0]
+    assess_task(world, task)  # warm-up: caches, imports
+    profiler = cProfile.Profile()
+    profiler.runcall(assess_task, world, task)
+    stats = pstats.Stats(profiler)
+    for key in ("cumulative", "tottime"):
+        stats.sort_stats(key).print_stats(top)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("repeats", nargs="?", type=int, default=3)
     parser.add_argument("--against", type=Path, default=None, help="another checkout to compare with")
     parser.add_argument("--rounds", type=int, default=3, help="alternating processes per tree (--against)")
+    parser.add_argument("--profile", type=int, default=0, metavar="N", help="print a profile's N top entries")
     args = parser.parse_args()
+    if args.profile > 0:
+        profile(args.profile)
+        return
     sums = measure(args.repeats)
     total, raw, knots = sums["total"], sums["raw"], sums["knots"]
     print("(* plan s: wall time in the fastest run, as assess_task records it; the other columns are CPU)")

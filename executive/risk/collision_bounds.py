@@ -64,13 +64,9 @@ class TravelBound:
         # fmax: a NaN (an unbounded travel less itself) leaves the broad-phase bound.
         return np.fmax(self.sphere[k], self.last - travel - self.slack)
 
-    def record(self, pairs: list[tuple[int, int]], distances: list[float]) -> None:
-        """Note that each layout pair (env ei, robot ri) of ``pairs`` is its ``distances`` entry
-        apart at knot ``self.k``."""
-        if not pairs:
-            return
-        ei, ri = (list(side) for side in zip(*pairs, strict=True))
-        self.last[ei, ri] = distances
+    def record(self, ei: int, ri: int, distance: float) -> None:
+        """Note that layout pair (env ei, robot ri) is ``distance`` apart at knot ``self.k``."""
+        self.last[ei, ri] = distance
         self.last_r[ei, ri] = self.cum_r[self.k, ri]
         self.last_e[ei, ri] = self.cum_e[self.k, ei]
 

@@ -238,15 +238,16 @@ class CollisionModel(CollisionPairs):
         cutoff, env_body, pair_distance = layout.cutoff_list, layout.env_body, self._pair_distance
         best, best_e, best_r, kept = math.inf, -1, -1, 1
         near_pairs: list[NearPair] = []
-        visited: list[tuple[int, int]] = []
-        distances: list[float] = []
+        checked = 0
+        record = travel.record if travel is not None else None
 
         def visit(ei: int, ri: int) -> None:
-            nonlocal best, best_e, best_r, kept
+            nonlocal best, best_e, best_r, kept, checked
             res = results[1 - kept]
             d = pair_distance(layout, ei, ri, res)
-            visited.append((ei, ri))
-            distances.append(d)
+            checked += 1
+            if record is not None:
+                record(ei, ri, d)
             if near and d <= cutoff[ei]:
                 near_pairs.append(NearPair(env_body[ei], env_ids[ei], robot_ids[ri], d, np.array(res.normal)))
             key = d if shift is None else d + shift[ei]
@@ -255,7 +256,8 @@ class CollisionModel(CollisionPairs):
 
         for ei, ri in zip(cand_e_list, cand_r_list, strict=True):
             visit(ei, ri)
-        if broad_phase:
+        # A pair beyond the first has its bound above its cutoff: none can beat a best below them all.
+        if broad_phase and (shift is not None or best > min(cutoff)):
             # Pairs beyond the cutoff, nearest bound first, until no bound is below the best.
             rest = np.where(first, np.inf, bounds if shift is None else bounds + shift[:, None])
             flat = rest.reshape(-1)
@@ -266,8 +268,6 @@ class CollisionModel(CollisionPairs):
                 ei, ri = divmod(idx, rest.shape[1])
                 self._place_pair(xpos, xmat, layout, placed_e, placed_r, ei, ri)
                 visit(ei, ri)
-        if travel is not None:
-            travel.record(visited, distances)
         witness = (np.zeros(3), np.zeros(3), np.zeros(3))
         if best_e >= 0:
             res = results[kept]
@@ -276,7 +276,7 @@ class CollisionModel(CollisionPairs):
         if shift is not None and best_e >= 0:
             best -= shift[best_e]
         return self._knot_distance(
-            best, env_ids[best_e], robot_ids[best_r], witness, len(visited), n_pairs, near_pairs
+            best, env_ids[best_e], robot_ids[best_r], witness, checked, n_pairs, near_pairs
         )
 
     def _first_pairs(
