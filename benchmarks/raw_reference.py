@@ -27,24 +27,35 @@ Knot = tuple[NDArray[np.float64], list[tuple[int, int]]]  # qpos, (env geom, rob
 
 def record_pairs(model: CollisionModel, run: Callable[[], object]) -> list[Knot]:
     """The knots ``run()`` makes ``model`` visit, each with the pairs it sent to coal."""
-    record: list[Knot] = []
-    knot, pair = model._knot_from_data, model._pair_distance
+    qpos: list[NDArray[np.float64]] = []  # the configurations, in the order of the knots queried
+    pairs: list[list[tuple[int, int]]] = []
+    knot, poses, knot_at, pair = model.knot, model._poses, model._knot_at, model._pair_distance
 
-    def knot_spy(data: mujoco.MjData, *args: Any) -> Any:
-        record.append((data.qpos.copy(), []))
-        return knot(data, *args)
+    def knot_spy(q: NDArray[np.float64], **kwargs: Any) -> Any:
+        qpos.append(np.array(q, dtype=float))
+        return knot(q, **kwargs)
 
-    def pair_spy(layout: Any, ei: int, ri: int) -> float:
-        record[-1][1].append((layout.env_list[ei], layout.robot_list[ri]))
-        return pair(layout, ei, ri)
+    def poses_spy(rows: NDArray[np.float64]) -> Any:
+        qpos.extend(np.array(rows, dtype=float))
+        return poses(rows)
 
-    model._knot_from_data = knot_spy  # type: ignore[method-assign,assignment]
-    model._pair_distance = pair_spy  # type: ignore[method-assign]
+    def knot_at_spy(*args: Any, **kwargs: Any) -> Any:
+        pairs.append([])
+        return knot_at(*args, **kwargs)
+
+    def pair_spy(layout: Any, ei: int, ri: int, *rest: Any) -> float:
+        pairs[-1].append((layout.env_list[ei], layout.robot_list[ri]))
+        return pair(layout, ei, ri, *rest)
+
+    model.knot, model._poses = knot_spy, poses_spy  # type: ignore[method-assign,assignment]
+    model._knot_at, model._pair_distance = knot_at_spy, pair_spy  # type: ignore[method-assign,assignment]
     try:
         run()
     finally:
-        del model._knot_from_data, model._pair_distance
-    return record
+        del model.knot, model._poses, model._knot_at, model._pair_distance
+    if len(qpos) != len(pairs):
+        raise RuntimeError(f"record_pairs: {len(qpos)} configurations for {len(pairs)} knots")
+    return list(zip(qpos, pairs, strict=True))
 
 
 def raw_distances(model: mujoco.MjModel, knots: Sequence[Knot]) -> Callable[[], None]:

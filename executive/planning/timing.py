@@ -19,6 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from executive.planning.limits import GeomPairCollisionLimit, SupportPolygon
 from executive.planning.loaded_com import LoadedCoM
 from executive.planning.types import PlannerConfig, PlanningError, Relative
+from executive.world.scratch import scratch_data
 
 __all__ = [
     "Frames",
@@ -216,14 +217,14 @@ def build_trajectory(
     s_path = path_parameter(model, path, joints.dofs, joints.limits, points, cfg.hand_speed)
     # Tangential acceleration a = |dq/ds| s'' <= v s'': bound s'' by a / v (v the largest limit).
     ratio = cfg.acceleration_limit / float(np.max(joints.limits))
-    data = mujoco.MjData(model)
-    times, knots = _zmp_timed_knots(
-        model, data, cfg, path, s_path, ratio, name, relative, polygon, frames, loaded
-    )
+    with scratch_data(model) as data:
+        times, knots = _zmp_timed_knots(
+            model, data, cfg, path, s_path, ratio, name, relative, polygon, frames, loaded
+        )
+        _check_clearance(model, data, cfg, collisions, knots, times, floor, name, len(path))
     # The last round's knots, a carried object re-attached to its hand (as _knot_kinematics left them).
     qpos, com = knots.qpos, knots.com
     hands = {s: knots.hands[:, i].copy() for i, s in enumerate(frames.hand_sites)}
-    _check_clearance(model, data, cfg, collisions, knots, times, floor, name, len(path))
     worst = float(np.min(polygon.margins(com)))
     if worst < cfg.support_margin - 1e-9:
         raise _timing_failure(
@@ -243,12 +244,12 @@ def _timing_failure(name: str, path_points: int, message: str) -> PlanningError:
 
 def _hand_points(model: mujoco.MjModel, path: FloatArray, sites: list[int]) -> FloatArray:
     """The positions (N, sides, 3) of the hand ``sites`` at each of the path's N points."""
-    scratch = mujoco.MjData(model)
     points = np.empty((len(path), len(sites), 3))
-    for i, q in enumerate(path):
-        scratch.qpos[:] = q
-        mujoco.mj_kinematics(model, scratch)
-        points[i] = scratch.site_xpos[sites]
+    with scratch_data(model) as scratch:
+        for i, q in enumerate(path):
+            scratch.qpos[:] = q
+            mujoco.mj_kinematics(model, scratch)
+            points[i] = scratch.site_xpos[sites]
     return points
 
 

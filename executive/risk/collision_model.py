@@ -178,7 +178,7 @@ class CollisionModel(CollisionPairs):
         mujoco.mj_kinematics(self.model, data)
         layout = self._layout(carried, allow)
         added = np.array([shift.get(b, 0.0) for b in layout.env_body]) if shift else None
-        return self._knot_from_data(data, layout, broad_phase, near=near, shift=added)
+        return self._knot_at(data.geom_xpos, data.geom_xmat, layout, broad_phase, near=near, shift=added)
 
     def profile(
         self, trajectory: TrajectoryLike, *, allow: Allow = (), broad_phase: bool = True
@@ -186,30 +186,33 @@ class CollisionModel(CollisionPairs):
         """Closest approach at every knot of ``trajectory`` (its carried object on the robot side)."""
         carried = trajectory.carried[1] if trajectory.carried is not None else None
         layout = self._layout(carried, allow)
-        qpos = np.asarray(trajectory.qpos, dtype=float)
-        data = self._data
-        knots = []
+        xpos, xmat = self._poses(np.asarray(trajectory.qpos, dtype=float))
         travel = None
-        if broad_phase and len(qpos):
-            # First pass: every knot's geom poses, for the bounds of all knots at once.
+        if broad_phase and len(xpos):
             geoms = np.concatenate([layout.env, layout.robot])
-            xpos, xmat = np.empty((len(qpos), len(geoms), 3)), np.empty((len(qpos), len(geoms), 9))
-            for k, row in enumerate(qpos):
-                data.qpos[:] = row
-                mujoco.mj_kinematics(self.model, data)
-                xpos[k], xmat[k] = data.geom_xpos[geoms], data.geom_xmat[geoms]
-            travel = TravelBound(self.model, layout, xpos, xmat)
-        for k, row in enumerate(qpos):
-            data.qpos[:] = row
-            mujoco.mj_kinematics(self.model, data)
+            travel = TravelBound(self.model, layout, xpos[:, geoms], xmat[:, geoms])
+        knots = []
+        for k in range(len(xpos)):
             if travel is not None:
                 travel.k = k
-            knots.append(self._knot_from_data(data, layout, broad_phase, travel))
+            knots.append(self._knot_at(xpos[k], xmat[k], layout, broad_phase, travel))
         return CollisionProfile(np.asarray(trajectory.times, dtype=float), tuple(knots))
 
-    def _knot_from_data(
+    def _poses(self, qpos: FloatArray) -> tuple[FloatArray, FloatArray]:
+        """Every geom's world pose at every knot of ``qpos`` (K, nq): (K, ngeom, 3) positions and
+        (K, ngeom, 9) rotation matrices, one ``mj_kinematics`` per knot."""
+        data, model = self._data, self.model
+        xpos, xmat = np.empty((len(qpos), model.ngeom, 3)), np.empty((len(qpos), model.ngeom, 9))
+        for k, row in enumerate(qpos):
+            data.qpos[:] = row
+            mujoco.mj_kinematics(model, data)
+            xpos[k], xmat[k] = data.geom_xpos, data.geom_xmat
+        return xpos, xmat
+
+    def _knot_at(
         self,
-        data: mujoco.MjData,
+        xpos: FloatArray,
+        xmat: FloatArray,
         layout: PairLayout,
         broad_phase: bool,
         travel: TravelBound | None = None,
@@ -217,29 +220,31 @@ class CollisionModel(CollisionPairs):
         near: bool = True,
         shift: FloatArray | None = None,
     ) -> KnotDistance:
-        """:meth:`knot` at the kinematics in ``data``: coal on the broad phase's first pairs, then
-        on the pairs beyond them nearest bound first while a bound is below the best distance.
-        ``travel``: the profile's bounds at every knot (at its knot ``k``), told every distance;
-        ``shift``: metres added per environment geom (layout order) when comparing pairs."""
+        """:meth:`knot` at the geom poses ``xpos`` (ngeom, 3), ``xmat`` (ngeom, 9): coal on the
+        broad phase's first pairs, then on the pairs beyond them nearest bound first while a bound
+        is below the best distance. ``travel``: the profile's bounds at every knot (at its knot
+        ``k``), told every distance; ``shift``: metres added per environment geom (layout order)
+        when comparing pairs."""
         n_pairs = layout.n_pairs
         if n_pairs == 0:
             raise CollisionModelError("no robot-environment pair is left to check (all allowed)")
-        bounds, first = self._first_pairs(data, layout, broad_phase, travel, near)
+        bounds, first = self._first_pairs(xpos, xmat, layout, broad_phase, travel, near)
         env_ids, robot_ids = layout.env_list, layout.robot_list
         cand_e, cand_r = np.nonzero(first)
-        placed_e, placed_r = self._place_first(data, layout, cand_e, cand_r)
-        res = self._result
-        cutoff = layout.cutoff_list
-        best, best_e, best_r = math.inf, -1, -1
-        witness = (np.zeros(3), np.zeros(3), np.zeros(3))
+        cand_e_list, cand_r_list = cand_e.tolist(), cand_r.tolist()
+        placed_e, placed_r = self._place_first(xpos, xmat, layout, cand_e_list, cand_r_list)
+        # Two coal results: the best pair's is kept (its witness) while the next pair is queried.
+        results = [self._result, self._spare]
+        cutoff, env_body, pair_distance = layout.cutoff_list, layout.env_body, self._pair_distance
+        best, best_e, best_r, kept = math.inf, -1, -1, 1
         near_pairs: list[NearPair] = []
         checked = 0
-        pair_distance, env_body = self._pair_distance, layout.env_body
         record = travel.record if travel is not None else None
 
         def visit(ei: int, ri: int) -> None:
-            nonlocal best, best_e, best_r, witness, checked
-            d = pair_distance(layout, ei, ri)
+            nonlocal best, best_e, best_r, kept, checked
+            res = results[1 - kept]
+            d = pair_distance(layout, ei, ri, res)
             checked += 1
             if record is not None:
                 record(ei, ri, d)
@@ -247,16 +252,12 @@ class CollisionModel(CollisionPairs):
                 near_pairs.append(NearPair(env_body[ei], env_ids[ei], robot_ids[ri], d, np.array(res.normal)))
             key = d if shift is None else d + shift[ei]
             if key < best:
-                best, best_e, best_r = key, ei, ri
-                witness = (
-                    np.array(res.getNearestPoint2()),
-                    np.array(res.getNearestPoint1()),
-                    np.array(res.normal),
-                )
+                best, best_e, best_r, kept = key, ei, ri, 1 - kept
 
-        for ei, ri in zip(cand_e.tolist(), cand_r.tolist(), strict=True):
+        for ei, ri in zip(cand_e_list, cand_r_list, strict=True):
             visit(ei, ri)
-        if broad_phase:
+        # A pair beyond the first has its bound above its cutoff: none can beat a best below them all.
+        if broad_phase and (shift is not None or best > min(cutoff)):
             # Pairs beyond the cutoff, nearest bound first, until no bound is below the best.
             rest = np.where(first, np.inf, bounds if shift is None else bounds + shift[:, None])
             flat = rest.reshape(-1)
@@ -265,8 +266,13 @@ class CollisionModel(CollisionPairs):
                 if flat[idx] >= best:  # the pair is excluded or already visited
                     break
                 ei, ri = divmod(idx, rest.shape[1])
-                self._place_pair(data, layout, placed_e, placed_r, ei, ri)
+                self._place_pair(xpos, xmat, layout, placed_e, placed_r, ei, ri)
                 visit(ei, ri)
+        witness = (np.zeros(3), np.zeros(3), np.zeros(3))
+        if best_e >= 0:
+            res = results[kept]
+            point_robot, point_env = np.array(res.getNearestPoint2()), np.array(res.getNearestPoint1())
+            witness = (point_robot, point_env, np.array(res.normal))
         if shift is not None and best_e >= 0:
             best -= shift[best_e]
         return self._knot_distance(
@@ -275,7 +281,8 @@ class CollisionModel(CollisionPairs):
 
     def _first_pairs(
         self,
-        data: mujoco.MjData,
+        xpos: FloatArray,
+        xmat: FloatArray,
         layout: PairLayout,
         broad_phase: bool,
         travel: TravelBound | None,
@@ -289,27 +296,28 @@ class CollisionModel(CollisionPairs):
         if travel is not None:
             bounds = travel.bounds()  # excluded pairs already at inf
         else:
-            bounds = np.where(layout.mask, self._lower_bounds(data, layout), np.inf)
+            bounds = np.where(layout.mask, self._lower_bounds(xpos, xmat, layout), np.inf)
         return bounds, (bounds <= layout.cutoff[:, None] if near else np.zeros_like(layout.mask))
 
     def _place_first(
-        self, data: mujoco.MjData, layout: PairLayout, cand_e: NDArray[np.int_], cand_r: NDArray[np.int_]
+        self, xpos: FloatArray, xmat: FloatArray, layout: PairLayout, cand_e: list[int], cand_r: list[int]
     ) -> tuple[list[bool], list[bool]]:
-        """Place the coal transforms of the geoms of the first pairs; returns which environment
-        and which robot geoms (layout order) are placed."""
+        """Place the coal transforms of the geoms of the first pairs (layout indices ``cand_e``,
+        ``cand_r``); returns which environment and which robot geoms (layout order) are placed."""
         placed_e = [False] * len(layout.env_list)
         placed_r = [False] * len(layout.robot_list)
-        for ei in set(cand_e.tolist()):
-            self._place(data, layout.env_list[ei])
+        for ei in set(cand_e):
+            self._place_pose(xpos, xmat, layout.env_list[ei])
             placed_e[ei] = True
-        for ri in set(cand_r.tolist()):
-            self._place(data, layout.robot_list[ri])
+        for ri in set(cand_r):
+            self._place_pose(xpos, xmat, layout.robot_list[ri])
             placed_r[ri] = True
         return placed_e, placed_r
 
     def _place_pair(
         self,
-        data: mujoco.MjData,
+        xpos: FloatArray,
+        xmat: FloatArray,
         layout: PairLayout,
         placed_e: list[bool],
         placed_r: list[bool],
@@ -318,10 +326,10 @@ class CollisionModel(CollisionPairs):
     ) -> None:
         """Place the coal transforms of layout pair (env ei, robot ri) unless they are placed."""
         if not placed_e[ei]:
-            self._place(data, layout.env_list[ei])
+            self._place_pose(xpos, xmat, layout.env_list[ei])
             placed_e[ei] = True
         if not placed_r[ri]:
-            self._place(data, layout.robot_list[ri])
+            self._place_pose(xpos, xmat, layout.robot_list[ri])
             placed_r[ri] = True
 
     def _knot_distance(
@@ -343,7 +351,7 @@ class CollisionModel(CollisionPairs):
             # Each pair against its body's own d_safety: the knot's risk is the largest.
             ratio = min(
                 [
-                    best / self.d_safety(int(self.model.geom_bodyid[env])),
+                    best / self.d_safety(self._geom_body[env]),
                     *(p.distance / self.d_safety(p.env_body) for p in near_pairs),
                 ]
             )
@@ -355,8 +363,8 @@ class CollisionModel(CollisionPairs):
             env_geom=env,
             robot_geom_name=self._geom_names[robot],
             env_geom_name=self._geom_names[env],
-            robot_body_name=self._body_names[int(self.model.geom_bodyid[robot])],
-            env_body_name=self._body_names[int(self.model.geom_bodyid[env])],
+            robot_body_name=self._body_names[self._geom_body[robot]],
+            env_body_name=self._body_names[self._geom_body[env]],
             point_robot=point_robot,
             point_env=point_env,
             normal=normal,

@@ -62,7 +62,7 @@ def monte_carlo_collision_probability(
     for k, row in enumerate(qpos):
         data.qpos[:] = row
         mujoco.mj_kinematics(mdl, data)
-        bounds = model._lower_bounds(data, layout)
+        bounds = model._lower_bounds(data.geom_xpos, data.geom_xmat, layout)
         hit = np.zeros(samples, dtype=bool)
         for ei, ri in zip(*np.nonzero(layout.mask), strict=True):
             calls += _sampled_hits(model, data, layout, ei, ri, bounds[ei, ri], draws, hit)

@@ -85,6 +85,8 @@ class CollisionPairs:
         self._request = coal.DistanceRequest()
         self._request.enable_signed_distance = True
         self._result = coal.DistanceResult()
+        self._spare = coal.DistanceResult()  # a knot's best pair keeps its result while others are queried
+        self._geom_body = [int(b) for b in model.geom_bodyid]
         self._layouts: dict[tuple[str | None, frozenset[str | tuple[str, str]]], PairLayout] = {}
         self._geom_names = [model.geom(g).name or f"geom{g}" for g in range(model.ngeom)]
         self._body_names = [model.body(b).name or f"body{b}" for b in range(model.nbody)]
@@ -239,33 +241,37 @@ class CollisionPairs:
 
     # --- coal distances ---------------------------------------------------------------------
 
-    def _lower_bounds(self, data: mujoco.MjData, layout: PairLayout) -> FloatArray:
-        """(E, R) broad-phase lower bounds: robot bounding sphere vs environment oriented box."""
-        return sphere_box_bounds(
-            self.model,
-            layout,
-            data.geom_xpos[layout.robot],
-            data.geom_xpos[layout.env],
-            data.geom_xmat[layout.env],
-        )
+    def _lower_bounds(self, xpos: FloatArray, xmat: FloatArray, layout: PairLayout) -> FloatArray:
+        """(E, R) broad-phase lower bounds at the geom poses ``xpos`` (ngeom, 3), ``xmat`` (ngeom, 9):
+        robot bounding sphere vs environment oriented box."""
+        return sphere_box_bounds(self.model, layout, xpos[layout.robot], xpos[layout.env], xmat[layout.env])
 
     def _place(self, data: mujoco.MjData, geom: int) -> None:
         """Copy ``geom``'s world pose from ``data`` into its coal transform."""
-        tf = self._transforms[geom]
-        tf.setRotation(data.geom_xmat[geom].reshape(3, 3))
-        tf.setTranslation(data.geom_xpos[geom])
+        self._place_pose(data.geom_xpos, data.geom_xmat, geom)
 
-    def _pair_distance(self, layout: PairLayout, ei: int, ri: int) -> float:
-        """coal signed distance of layout pair (env ei, robot ri) at the placed transforms."""
+    def _place_pose(self, xpos: FloatArray, xmat: FloatArray, geom: int) -> None:
+        """Copy ``geom``'s world pose from poses of every geom (``xpos`` (ngeom, 3), ``xmat``
+        (ngeom, 9), as ``MjData.geom_xpos`` and ``geom_xmat``) into its coal transform."""
+        tf = self._transforms[geom]
+        tf.setRotation(xmat[geom].reshape(3, 3))
+        tf.setTranslation(xpos[geom])
+
+    def _pair_distance(
+        self, layout: PairLayout, ei: int, ri: int, result: coal.DistanceResult | None = None
+    ) -> float:
+        """coal signed distance of layout pair (env ei, robot ri) at the placed transforms, its
+        witness points and normal left in ``result`` (default: the model's own result)."""
+        res = self._result if result is None else result
         # The functor does not reset a reused result: without clear() the witness points and
         # normal can be those of an earlier, closer query (docs/measurements.md).
-        self._result.clear()
+        res.clear()
         return float(
             layout.functors[ei][ri](
                 self._transforms[layout.env_list[ei]],
                 self._transforms[layout.robot_list[ri]],
                 self._request,
-                self._result,
+                res,
             )
         )
 

@@ -22,6 +22,7 @@ from executive.planning.timing import Trajectory
 from executive.risk.fall_batch import KnotPolygons, hulls
 from executive.world.model import World
 from executive.world.polygon import convex_hull
+from executive.world.scratch import scratch_data
 
 __all__ = ["FallKnots", "fall_knots", "support_polygon"]
 
@@ -161,7 +162,6 @@ def fall_knots(
             f"assess_fall: trajectory '{trajectory.name}' has qpos {qpos.shape} and {len(times)} "
             f"times; the world's model needs (K, {model.nq}) with K = len(times) >= 1"
         )
-    data = mujoco.MjData(model)
     base, torso = world.ids.base_body, world.ids.torso_body
     count = len(times)
     feet = [g for gs in world.ids.foot_geoms.values() for g in gs]
@@ -170,17 +170,18 @@ def fall_knots(
     xmat = np.zeros((count, len(feet), 9))
     pelvis, upright = np.zeros(count), np.zeros(count)
     loads = {load: LoadedCoM(world, load) for load in set(carried or ()) if load is not None}
-    for k in range(count):
-        data.qpos[:] = qpos[k]
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
-        load = carried[k] if carried is not None else None
-        coms[k] = data.subtree_com[base] if load is None else loads[load].position(data)
-        xpos[k] = data.geom_xpos[feet]
-        xmat[k] = data.geom_xmat[feet]
-        pelvis[k] = data.xpos[base][2]
-        upright[k] = data.xmat[torso][8]
-    ground = _ground_height(world, data)
+    with scratch_data(model) as data:
+        for k in range(count):
+            data.qpos[:] = qpos[k]
+            mujoco.mj_kinematics(model, data)
+            mujoco.mj_comPos(model, data)
+            load = carried[k] if carried is not None else None
+            coms[k] = data.subtree_com[base] if load is None else loads[load].position(data)
+            xpos[k] = data.geom_xpos[feet]
+            xmat[k] = data.geom_xmat[feet]
+            pelvis[k] = data.xpos[base][2]
+            upright[k] = data.xmat[torso][8]
+        ground = _ground_height(world, data)
     points = _foot_points_batch(world, xpos, xmat.reshape(count, len(feet), 3, 3))
     down = points[..., 2] <= ground + 0.01
     polygons = hulls(points[..., :2], down)

@@ -23,6 +23,7 @@ from executive.risk.gaussian import gauss_hermite_normal, normal_cdf
 from executive.risk.hand_span import hand_collision_geoms
 from executive.risk.model_geometry import geom_corners, geom_points, half_extent
 from executive.world.model import World
+from executive.world.scratch import scratch_data
 
 __all__ = ["ApproachEnvelope", "approach_envelope", "approach_miss_probability"]
 
@@ -126,17 +127,17 @@ def approach_envelope(
     x_world = np.array([y_world[1], -y_world[0], 0.0])
     centre = world.data.geom_xpos[geom].copy()
     top = float(centre[2] + half_extent(model, geom, rot.T @ np.array([0.0, 0.0, 1.0])))
-    data = mujoco.MjData(model)
     geoms = hand_collision_geoms(world, side)
     corners: list[FloatArray] = []
-    for q in np.asarray(qpos_path, dtype=float).reshape(-1, model.nq):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        for g in geoms:
-            pts = _below(model, data, g, top)
-            if len(pts):
-                rel = pts - centre
-                corners.append(np.column_stack([rel @ x_world, rel @ y_world]))
+    with scratch_data(model) as data:
+        for q in np.asarray(qpos_path, dtype=float).reshape(-1, model.nq):
+            data.qpos[:] = q
+            mujoco.mj_kinematics(model, data)
+            for g in geoms:
+                pts = _below(model, data, g, top)
+                if len(pts):
+                    rel = pts - centre
+                    corners.append(np.column_stack([rel @ x_world, rel @ y_world]))
     flat = np.concatenate(corners) if corners else np.zeros((0, 2))
     width = half_extent(model, geom, c_axis)
     # Beyond the object's circumradius along its lateral axis a point passes its end at any yaw

@@ -25,8 +25,9 @@ from numpy.typing import NDArray
 
 from executive.risk.model_geometry import geom_corners
 from executive.world.model import World
+from executive.world.scratch import scratch_data
 
-__all__ = ["HandSpan", "hand_collision_geoms", "hand_span", "posed_hand"]
+__all__ = ["HandSpan", "hand_collision_geoms", "hand_span", "pose_hand", "posed_hand"]
 
 FloatArray = NDArray[np.float64]
 
@@ -75,15 +76,21 @@ def posed_hand(world: World, side: str, targets: tuple[float, ...] | None = None
     Returns:
         The data, with kinematics computed.
     """
+    data = mujoco.MjData(world.model)
+    pose_hand(world, side, targets, data)
+    return data
+
+
+def pose_hand(world: World, side: str, targets: tuple[float, ...] | None, data: mujoco.MjData) -> None:
+    """Put ``data`` (of ``world.model``) at the home keyframe with the ``side`` gripper's joints
+    at ``targets`` (None: the keyframe's) and compute its kinematics (see :func:`posed_hand`)."""
     model = world.model
-    data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, world.ids.keyframe)
     if targets is not None:
         for act, value in zip(world.ids.gripper_actuators[side], targets, strict=True):
             joint = int(model.actuator_trnid[act, 0])
             data.qpos[model.jnt_qposadr[joint]] = value
     mujoco.mj_kinematics(model, data)
-    return data
 
 
 def _ray(
@@ -117,21 +124,23 @@ def hand_span(world: World, side: str, *, closed: bool = False) -> HandSpan:
     """
     model = world.model
     grip = world.profile.arms[side].gripper
-    data = posed_hand(world, side, tuple(grip.closed) if closed else None)
-    site = world.ids.hand_sites[side]
-    origin = data.site_xpos[site].copy()
-    frame = data.site_xmat[site].reshape(3, 3)
-    closing, approach, lateral = frame[:, 1].copy(), frame[:, 2].copy(), frame[:, 0].copy()
-    geoms = hand_collision_geoms(world, side)
-    corners = np.vstack([geom_corners(model, data, g) for g in geoms])
-    depth = max(float(np.max((corners - origin) @ approach)), 0.0)
-    # Parallel rays through the region an object between the jaws fills: across the site's
-    # lateral axis (x) and down its approach axis to the fingertips; each side's nearest hit.
-    starts = [
-        origin + a * lateral + b * approach
-        for a in np.linspace(-FAN_HALF_WIDTH, FAN_HALF_WIDTH, 5)
-        for b in np.linspace(0.0, depth, 3)
-    ]
-    near = min(_ray(model, data, geoms, p, closing) for p in starts)
-    far = min(_ray(model, data, geoms, p, -closing) for p in starts)
+    targets = tuple(grip.closed) if closed else None
+    with scratch_data(model) as data:
+        pose_hand(world, side, targets, data)
+        site = world.ids.hand_sites[side]
+        origin = data.site_xpos[site].copy()
+        frame = data.site_xmat[site].reshape(3, 3)
+        closing, approach, lateral = frame[:, 1].copy(), frame[:, 2].copy(), frame[:, 0].copy()
+        geoms = hand_collision_geoms(world, side)
+        corners = np.vstack([geom_corners(model, data, g) for g in geoms])
+        depth = max(float(np.max((corners - origin) @ approach)), 0.0)
+        # Parallel rays through the region an object between the jaws fills: across the site's
+        # lateral axis (x) and down its approach axis to the fingertips; each side's nearest hit.
+        starts = [
+            origin + a * lateral + b * approach
+            for a in np.linspace(-FAN_HALF_WIDTH, FAN_HALF_WIDTH, 5)
+            for b in np.linspace(0.0, depth, 3)
+        ]
+        near = min(_ray(model, data, geoms, p, closing) for p in starts)
+        far = min(_ray(model, data, geoms, p, -closing) for p in starts)
     return HandSpan(opening=near + far, near=near, far=far, finger_depth=depth)

@@ -24,6 +24,7 @@ from executive.risk.hold_grip import Grip, grip
 from executive.risk.hold_patch import patch
 from executive.risk.model_geometry import body_half_extent, site_pose_at
 from executive.world.model import World
+from executive.world.scratch import scratch_data
 
 __all__ = [
     "GRAVITY",
@@ -140,14 +141,14 @@ def servo_sag(
         (3,) the probe point's displacement per kg of held mass.
     """
     model = world.model
-    data = mujoco.MjData(model)
-    data.qpos[:] = qpos
-    mujoco.mj_kinematics(model, data)
-    mujoco.mj_comPos(model, data)
     body = int(model.site_bodyid[world.ids.hand_sites[side]])
     jac_load, jac_probe = np.zeros((3, model.nv)), np.zeros((3, model.nv))
-    mujoco.mj_jac(model, data, jac_load, None, np.asarray(load_point, dtype=float), body)
-    mujoco.mj_jac(model, data, jac_probe, None, np.asarray(probe_point, dtype=float), body)
+    with scratch_data(model) as data:
+        data.qpos[:] = qpos
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        mujoco.mj_jac(model, data, jac_load, None, np.asarray(load_point, dtype=float), body)
+        mujoco.mj_jac(model, data, jac_probe, None, np.asarray(probe_point, dtype=float), body)
     grippers = {a for acts in world.ids.gripper_actuators.values() for a in acts}
     compliance = np.zeros(model.nv)
     for a in range(model.nu):

@@ -16,10 +16,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.world.model import World
+from executive.world.scratch import scratch_data
 
 __all__ = ["body_half_extent", "geom_corners", "geom_points", "half_extent", "site_pose_at"]
 
 FloatArray = NDArray[np.float64]
+#: The signs of a box's 8 corners about its centre, in units of its half sizes.
+_CORNER_SIGNS = np.array([[i, j, k] for i in (-1.0, 1.0) for j in (-1.0, 1.0) for k in (-1.0, 1.0)])
+_CORNER_SIGNS.flags.writeable = False
 
 
 def half_extent(model: mujoco.MjModel, geom: int, axis_local: FloatArray) -> float:
@@ -45,9 +49,8 @@ def body_half_extent(model: mujoco.MjModel, geom: int, axis_body: FloatArray) ->
 def geom_corners(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> FloatArray:
     """World corners (8, 3) of a geom's local bounding box (the box itself for a box geom)."""
     centre, half = model.geom_aabb[geom, :3], model.geom_aabb[geom, 3:]
-    signs = np.array([[i, j, k] for i in (-1.0, 1.0) for j in (-1.0, 1.0) for k in (-1.0, 1.0)])
     rot = data.geom_xmat[geom].reshape(3, 3)
-    return np.asarray(data.geom_xpos[geom] + (centre + signs * half) @ rot.T, dtype=float)
+    return np.asarray(data.geom_xpos[geom] + (centre + _CORNER_SIGNS * half) @ rot.T, dtype=float)
 
 
 def geom_points(model: mujoco.MjModel, data: mujoco.MjData, geom: int) -> FloatArray:
@@ -74,8 +77,8 @@ def site_pose_at(world: World, qpos: FloatArray, side: str) -> tuple[FloatArray,
     Returns:
         (position (3,), rotation (3, 3) with columns the site's x, y, z axes).
     """
-    data = mujoco.MjData(world.model)
-    data.qpos[:] = qpos
-    mujoco.mj_kinematics(world.model, data)
-    site = world.ids.hand_sites[side]
-    return data.site_xpos[site].copy(), data.site_xmat[site].reshape(3, 3).copy()
+    with scratch_data(world.model) as data:
+        data.qpos[:] = qpos
+        mujoco.mj_kinematics(world.model, data)
+        site = world.ids.hand_sites[side]
+        return data.site_xpos[site].copy(), data.site_xmat[site].reshape(3, 3).copy()

@@ -32,6 +32,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from executive.world.model import World
+from executive.world.scratch import scratch_data
 
 __all__ = ["Hold", "ServoSet"]
 
@@ -123,7 +124,6 @@ class ServoSet:
         start = int(model.jnt_dofadr[free[0]]) if free else 0
         self.base = np.arange(start, start + 6) if free else np.zeros(0, dtype=int)
         self.feet = [int(model.body(foot.body).id) for foot in world.profile.feet.values()] if free else []
-        self._scratch = mujoco.MjData(model)
 
     @classmethod
     def of(cls, world: World) -> ServoSet:
@@ -144,14 +144,15 @@ class ServoSet:
             the plan has them (their wrenches take up the difference); :meth:`Hold.total` sums
             them and holds a joint at its range.
         """
-        d = self._scratch
-        d.qpos[:] = qpos
-        d.qvel[:] = 0.0
-        mujoco.mj_kinematics(model, d)
-        mujoco.mj_comPos(model, d)
-        gravity = np.empty(model.nv)
-        mujoco.mj_rne(model, d, 0, gravity)  # at rest: gravity only
-        contact = self._feet_jacobian(model, d)
+        with scratch_data(model) as d:
+            d.qpos[:] = qpos
+            d.qvel[:] = 0.0
+            mujoco.mj_kinematics(model, d)
+            mujoco.mj_comPos(model, d)
+            gravity = np.empty(model.nv)
+            mujoco.mj_rne(model, d, 0, gravity)  # at rest: gravity only
+            contact = self._feet_jacobian(model, d)
+            softening = self._gravity_stiffness(model, d, qpos, gravity, contact) if len(contact) else None
         feed = np.where(self.bias, gravity[self.dofs], 0.0)
         if self.legs.any() and len(contact):
             feed = feed + np.where(self.legs, self._leg_load(gravity, contact)[self.dofs], 0.0)
@@ -160,7 +161,6 @@ class ServoSet:
         deficit = np.zeros(model.nv)
         deficit[self.dofs] = feed - self.stiffness * (given - target)
         rhs = np.vstack([-deficit[None, :], np.atleast_2d(loads)])
-        softening = self._gravity_stiffness(model, qpos, gravity, contact) if len(contact) else None
         dq = self._solve(model.nv, contact, rhs, softening)
         torque = -self.stiffness * dq[:, self.dofs]
         torque[0] += self.stiffness * (given - target)
@@ -190,13 +190,19 @@ class ServoSet:
         return np.asarray(gravity - contact.T @ wrench, dtype=float)
 
     def _gravity_stiffness(
-        self, model: mujoco.MjModel, qpos: FloatArray, gravity: FloatArray, contact: FloatArray
+        self,
+        model: mujoco.MjModel,
+        d: mujoco.MjData,
+        qpos: FloatArray,
+        gravity: FloatArray,
+        contact: FloatArray,
     ) -> FloatArray:
         """(nv, nv) d(g - J_c^T f0)/dq on the rows whose feed-forward is fixed at the target (the
-        base and the legs): how the body's weight turns as it leans (forward differences)."""
+        base and the legs): how the body's weight turns as it leans (forward differences, in the
+        scratch data ``d``)."""
         base = contact[:, self.base]
         wrench = np.linalg.lstsq(base.T, gravity[self.base], rcond=None)[0]
-        d, eps = self._scratch, 1e-6
+        eps = 1e-6
         # The base, legs and waist lean the body; an arm's deflection moves the weight on the legs
         # by its own mass times a few centimetres: its columns are left out.
         free = np.concatenate([self.base, self.dofs[~self.arms]])

@@ -45,6 +45,7 @@ from executive.risk.gaussian import ball_exceed_probability, gauss_hermite_norma
 from executive.risk.report import RiskReport
 from executive.risk.servo import Hold, ServoSet
 from executive.world.model import World
+from executive.world.scratch import scratch_data
 
 __all__ = [
     "MEASURED_SIGMA",
@@ -238,18 +239,18 @@ def _move_end(
     held = carried if step.kind != "place" else None
     load = _object_load(world, q, held) if held else np.zeros((0, model.nv))
     hold = servos.hold(model, q, load)
-    data = mujoco.MjData(model)
-    data.qpos[:] = q
-    mujoco.mj_kinematics(model, data)
-    mujoco.mj_comPos(model, data)
     scale = np.array([mass]) if held else np.zeros(0)
     dq = hold.total(servos.dofs, scale)
     hands = []
-    for side in traj.hand_paths:
-        jac = np.zeros((3, model.nv))
-        mujoco.mj_jacSite(model, data, jac, None, world.ids.hand_sites[side])
-        per_kg = jac @ hold.deflection[1] if held else np.zeros(3)
-        hands.append(HandEnd(side, jac @ dq, per_kg, np.zeros(3)))
+    with scratch_data(model) as data:
+        data.qpos[:] = q
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        for side in traj.hand_paths:
+            jac = np.zeros((3, model.nv))
+            mujoco.mj_jacSite(model, data, jac, None, world.ids.hand_sites[side])
+            per_kg = jac @ hold.deflection[1] if held else np.zeros(3)
+            hands.append(HandEnd(side, jac @ dq, per_kg, np.zeros(3)))
     peak = _peak_ratio(world, servos, traj, carried, mass)
     return MoveEnd(step.name, MOVE_TOLERANCE, tuple(hands), _mass_range(hold, bool(held)), peak)
 
@@ -258,15 +259,15 @@ def _object_load(world: World, qpos: FloatArray, carried: tuple[str, str]) -> Fl
     """(1, nv) the generalised force of 1 kg at the carried object's centre of mass, held by the
     hand: ``J^T m g`` with ``J`` the hand body's Jacobian at that point (the object's own dofs 0)."""
     model = world.model
-    data = mujoco.MjData(model)
-    data.qpos[:] = qpos
-    mujoco.mj_kinematics(model, data)
-    mujoco.mj_comPos(model, data)
     side, obj = carried
-    point = data.xipos[world.ids.object_bodies[obj]]
     hand = int(model.body(world.profile.arms[side].hand_body).id)
     jac = np.zeros((3, model.nv))
-    mujoco.mj_jac(model, data, jac, None, point, hand)
+    with scratch_data(model) as data:
+        data.qpos[:] = qpos
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        point = data.xipos[world.ids.object_bodies[obj]]
+        mujoco.mj_jac(model, data, jac, None, point, hand)
     return (jac.T @ _GRAVITY)[None, :]
 
 
@@ -303,24 +304,24 @@ def _peak_ratio(
         return 0.0
     dofs, limits = servos.dofs[upper], servos.limit[upper]
     qvel, qacc = _rates(model, traj)
-    data = mujoco.MjData(model)
     force = np.empty(model.nv)
     hand = int(model.body(world.profile.arms[carried[0]].hand_body).id) if carried else -1
     peak = 0.0
-    for k in range(0, len(traj.times), _KNOT_STRIDE):
-        data.qpos[:], data.qvel[:], data.qacc[:] = traj.qpos[k], qvel[k], qacc[k]
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
-        mujoco.mj_comVel(model, data)
-        mujoco.mj_rne(model, data, 1, force)
-        need = force[dofs]
-        if carried:
-            jac = np.zeros((3, model.nv))
-            point = data.xipos[world.ids.object_bodies[carried[1]]]
-            mujoco.mj_jac(model, data, jac, None, point, hand)
-            acc = jac @ qacc[k]
-            need = need - mass * (jac[:, dofs].T @ (_GRAVITY - acc))
-        peak = max(peak, float(np.max(np.abs(need) / limits)))
+    with scratch_data(model) as data:
+        for k in range(0, len(traj.times), _KNOT_STRIDE):
+            data.qpos[:], data.qvel[:], data.qacc[:] = traj.qpos[k], qvel[k], qacc[k]
+            mujoco.mj_kinematics(model, data)
+            mujoco.mj_comPos(model, data)
+            mujoco.mj_comVel(model, data)
+            mujoco.mj_rne(model, data, 1, force)
+            need = force[dofs]
+            if carried:
+                jac = np.zeros((3, model.nv))
+                point = data.xipos[world.ids.object_bodies[carried[1]]]
+                mujoco.mj_jac(model, data, jac, None, point, hand)
+                acc = jac @ qacc[k]
+                need = need - mass * (jac[:, dofs].T @ (_GRAVITY - acc))
+            peak = max(peak, float(np.max(np.abs(need) / limits)))
     return peak
 
 

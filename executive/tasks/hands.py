@@ -17,6 +17,7 @@ from executive.planning.planner import HandTarget
 from executive.planning.types import site_quat
 from executive.world.heading import yaw_of
 from executive.world.model import World
+from executive.world.scratch import scratch_data
 
 __all__ = ["ONE_HAND", "UP", "HandFrames", "top_down_quat"]
 
@@ -50,28 +51,28 @@ class HandFrames:
 
     def __init__(self, world: World, stance: tuple[float, float, float] | None = None) -> None:
         self.world = world
-        data = mujoco.MjData(world.model)
-        mujoco.mj_resetDataKeyframe(world.model, data, world.ids.keyframe)
-        mujoco.mj_kinematics(world.model, data)
-        mat = data.xmat[world.ids.base_body]
-        start, start_heading = data.xpos[world.ids.base_body].copy(), float(np.arctan2(mat[3], mat[0]))
-        if stance is None:
-            self._moved = _walked(world, start, start_heading)
-        else:
-            shift = np.array(stance[:2], dtype=float) - start[:2]
-            self._moved = _Walked(start, stance[2] - start_heading, shift)
-        self.home = {  # poses of the body: they move with the base (frame "base")
-            side: self._moved.target(
-                HandTarget(side, data.site_xpos[site].copy(), site_quat(data, site), frame="base")
-            )
-            for side, site in world.ids.hand_sites.items()
-        }
-        self.base = self._moved.point(start)
-        self.heading = start_heading + self._moved.turn  # yaw of the base's forward (x) axis
-        self.shoulder = {  # each arm's first joint
-            side: self._moved.point(data.xanchor[world.model.joint(arm.joints[0]).id].copy())
-            for side, arm in world.profile.arms.items()
-        }
+        with scratch_data(world.model) as data:
+            mujoco.mj_resetDataKeyframe(world.model, data, world.ids.keyframe)
+            mujoco.mj_kinematics(world.model, data)
+            mat = data.xmat[world.ids.base_body]
+            start, start_heading = data.xpos[world.ids.base_body].copy(), float(np.arctan2(mat[3], mat[0]))
+            if stance is None:
+                self._moved = _walked(world, start, start_heading)
+            else:
+                shift = np.array(stance[:2], dtype=float) - start[:2]
+                self._moved = _Walked(start, stance[2] - start_heading, shift)
+            self.home = {  # poses of the body: they move with the base (frame "base")
+                side: self._moved.target(
+                    HandTarget(side, data.site_xpos[site].copy(), site_quat(data, site), frame="base")
+                )
+                for side, site in world.ids.hand_sites.items()
+            }
+            self.base = self._moved.point(start)
+            self.heading = start_heading + self._moved.turn  # yaw of the base's forward (x) axis
+            self.shoulder = {  # each arm's first joint
+                side: self._moved.point(data.xanchor[world.model.joint(arm.joints[0]).id].copy())
+                for side, arm in world.profile.arms.items()
+            }
 
     def stance(self) -> tuple[float, float, float]:
         """Where the base stands in these frames: pelvis x, y on the floor and heading (rad)."""
