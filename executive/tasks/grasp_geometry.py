@@ -23,12 +23,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from executive.planning.types import PlanningError
 from executive.risk.grasp import grasp_tolerance
-from executive.risk.hand_span import hand_span
+from executive.risk.hand_span import FAN_HALF_WIDTH, hand_collision_geoms, hand_span, posed_hand, ray_to_hand
+from executive.risk.model_geometry import geom_corners
 from executive.world.model import World
 
-__all__ = ["GraspGeometryError", "HandGeometry", "check_grasp", "hand_geometry", "min_thickness"]
+__all__ = [
+    "GraspGeometryError",
+    "HandGeometry",
+    "check_grasp",
+    "hand_geometry",
+    "hand_profile",
+    "min_thickness",
+]
 
 
 #: m of floating-point rounding in the geometry (box corners and targets from rotations).
@@ -50,10 +60,16 @@ class HandGeometry:
         jaw_opening: free span between the open jaws along the site's closing axis (y),
             through the site; inf when nothing of the hand closes across the site.
         finger_depth: how far the hand reaches past its site along the approach (site z).
+        half_thickness: how far the hand reaches from its site either way across the approach
+            and the closing axis (site x, the larger side): below the site in a grasp from the side.
+        palm_gap: free length from the site back along the approach to the palm (the deepest an
+            object may reach into the hand past the site).
     """
 
     jaw_opening: float
     finger_depth: float
+    half_thickness: float = 0.0
+    palm_gap: float = float("inf")
 
 
 def hand_geometry(world: World, side: str) -> HandGeometry:
@@ -72,7 +88,33 @@ def hand_geometry(world: World, side: str) -> HandGeometry:
         The hand's :class:`HandGeometry`.
     """
     span, closed = hand_span(world, side), hand_span(world, side, closed=True)
-    return HandGeometry(jaw_opening=span.opening, finger_depth=max(span.finger_depth, closed.finger_depth))
+    thickness, palm = hand_profile(world, side)
+    return HandGeometry(
+        jaw_opening=span.opening,
+        finger_depth=max(span.finger_depth, closed.finger_depth),
+        half_thickness=thickness,
+        palm_gap=palm,
+    )
+
+
+def hand_profile(world: World, side: str) -> tuple[float, float]:
+    """The open ``side`` hand's half thickness along its site's x and its palm gap (m).
+
+    Measured on the model at the home keyframe: the hand's collision geoms' bounding-box corners
+    in the site frame give the thickness; a fan of rays from the site's region back along -z
+    (:func:`executive.risk.hand_span.ray_to_hand`) the nearest surface behind the site.
+    """
+    data = posed_hand(world, side)
+    site = world.ids.hand_sites[side]
+    origin, frame = data.site_xpos[site].copy(), data.site_xmat[site].reshape(3, 3)
+    geoms = hand_collision_geoms(world, side)
+    local = (np.vstack([geom_corners(world.model, data, g) for g in geoms]) - origin) @ frame
+    thickness = float(np.max(np.abs(local[:, 0])))
+    # Rays from a pad's width about the site, back along the approach: the first hand surface.
+    back = -frame[:, 2]
+    starts = [origin + a * frame[:, 0] for a in np.linspace(-FAN_HALF_WIDTH, FAN_HALF_WIDTH, 5)]
+    gap = min(ray_to_hand(world.model, data, geoms, p, back) for p in starts)
+    return thickness, gap
 
 
 def _width_and_opening(world: World, side: str, obj: str) -> tuple[float, float]:
