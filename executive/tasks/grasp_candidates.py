@@ -26,6 +26,7 @@ Usage::
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -38,7 +39,8 @@ from executive.risk.gaussian import exceed_probability
 from executive.risk.grasp_tolerance import grasp_tolerance
 from executive.risk.model_geometry import half_extent
 from executive.robot.model import robot_facts
-from executive.tasks.grasp_geometry import HandGeometry, hand_geometry
+from executive.schema.types import Body
+from executive.tasks.grasp_geometry import HandGeometry, hand_geometry, hand_points
 from executive.tasks.hands import HandFrames
 from executive.tasks.phases import grasp_height
 from executive.world.model import World
@@ -50,6 +52,7 @@ __all__ = [
     "GraspKind",
     "grasp_candidates",
     "grasp_frame",
+    "home_approach",
     "rank_grasps",
     "register_grasp",
 ]
@@ -69,18 +72,25 @@ class GraspKind:
             (from the hand's own side towards the midline).
         closing: ``object_y`` or ``object_x`` (across the object's local axis, from above), or
             ``level`` (level and across the approach).
+        pitch_deg: how far the approach dips below level (0: level, 90: straight down).
         description: one line for the schema and the docs.
     """
 
     name: str
     approach: str
     closing: str
+    pitch_deg: float
     description: str
 
     @property
     def level(self) -> bool:
-        """Whether the hand comes in level (its site's x axis vertical)."""
+        """Whether the hand comes in from a side (the jaws close level across that side)."""
         return self.approach != "down"
+
+    @property
+    def from_above(self) -> bool:
+        """Whether the hand comes in steeper than 45 deg: it closes under the top, as a top grasp."""
+        return self.pitch_deg >= 45.0
 
 
 #: Every grasp by name; :func:`register_grasp` adds one.
@@ -94,12 +104,25 @@ def register_grasp(kind: GraspKind) -> None:
     GRASPS[kind.name] = kind
 
 
-register_grasp(GraspKind("top", "down", "object_y", "from above, the jaws across the object's width"))
-register_grasp(GraspKind("top_across", "down", "object_x", "from above, the jaws across the object's length"))
-register_grasp(GraspKind("front", "forward", "level", "level from the front, the jaws closing level"))
-register_grasp(
-    GraspKind("side", "inward", "level", "level from the hand's own side, the jaws closing fore-aft")
-)
+register_grasp(GraspKind("top", "down", "object_y", 90.0, "from above, the jaws across the object's width"))
+register_grasp(GraspKind("top_across", "down", "object_x", 90.0, "from above, the jaws across its length"))
+for _pitch in (0, 45, 75):
+    _tail = f"_{_pitch}" if _pitch else ""
+    _dip = f", dipping {_pitch} deg" if _pitch else ", level"
+    register_grasp(
+        GraspKind(
+            f"front{_tail}",
+            "forward",
+            "level",
+            float(_pitch),
+            f"from the front{_dip}, the jaws closing level",
+        )
+    )
+    register_grasp(
+        GraspKind(
+            f"side{_tail}", "inward", "level", float(_pitch), f"from the hand's own side{_dip}, jaws fore-aft"
+        )
+    )
 
 
 @dataclass(frozen=True)
@@ -153,56 +176,72 @@ def _cm(length: float) -> str:
 
 def _axes(kind: GraspKind, h: HandFrames, side: str, obj_rot: FloatArray) -> tuple[FloatArray, FloatArray]:
     """The approach and closing axes (world, unit) of ``kind`` for the ``side`` hand."""
+    down = np.array([0.0, 0.0, -1.0])
     if kind.approach == "down":
-        approach = np.array([0.0, 0.0, -1.0])
         axis = obj_rot[:, 1] if kind.closing == "object_y" else obj_rot[:, 0]
-        closing = np.array([axis[0], axis[1], 0.0])
+        approach, closing = down, np.array([axis[0], axis[1], 0.0])
     else:
         forward = np.array([math.cos(h.heading), math.sin(h.heading), 0.0])
         left = np.array([-forward[1], forward[0], 0.0])
         inward = -left if h.side_of_body(h.home[side].position) > 0 else left
-        approach = forward if kind.approach == "forward" else inward
-        closing = np.cross(np.array([0.0, 0.0, 1.0]), approach)
+        level = forward if kind.approach == "forward" else inward
+        pitch = math.radians(kind.pitch_deg)
+        approach = math.cos(pitch) * level + math.sin(pitch) * down
+        closing = np.cross(np.array([0.0, 0.0, 1.0]), level)
     closing /= np.linalg.norm(closing)
-    home = np.zeros(9)
-    mujoco.mju_quat2Mat(home, h.home[side].quat)
-    if float(np.dot(closing, home.reshape(3, 3)[:, 1])) < 0.0:  # of the two, the one nearer home's
+    if float(np.dot(closing, _home_frame(h, side)[:, 1])) < 0.0:  # of the two, the one nearer home's
         closing = -closing
     return approach, closing
 
 
-def _level_site(
+def _home_frame(h: HandFrames, side: str) -> FloatArray:
+    mat = np.zeros(9)
+    mujoco.mju_quat2Mat(mat, h.home[side].quat)
+    return mat.reshape(3, 3)
+
+
+def _site(
+    kind: GraspKind,
+    body: Body,
     centre: FloatArray,
     approach: FloatArray,
-    half_along: float,
+    along: float,
     hand: HandGeometry,
-    table: float,
-    clear: float,
+    cfg: CompositionConfig,
 ) -> FloatArray:
-    """The site of a level grasp: at the centre's height, raised until the hand clears the table, and
-    back from the centre along the approach where the object would otherwise reach the palm."""
-    z = max(float(centre[2]), table + clear + hand.half_thickness)
-    back = max(0.0, half_along - hand.palm_gap)
-    site = centre - back * approach
-    return np.array([site[0], site[1], z])
+    """Where the site closes before the table is considered: under the top (from above) or at the
+    centre's height (from a side), back from the centre along a level approach where the object
+    would otherwise reach the palm."""
+    if kind.from_above:
+        return np.array([centre[0], centre[1], grasp_height(body, float(centre[2]), cfg)])
+    level = np.array([approach[0], approach[1], 0.0]) / max(float(np.hypot(approach[0], approach[1])), 1e-9)
+    return centre - max(0.0, along - hand.palm_gap) * level
 
 
 def _reason(
-    world: World, kind: GraspKind, c: GraspCandidate, hand: HandGeometry, top: float, cfg: CompositionConfig
+    c: GraspCandidate,
+    kind: GraspKind,
+    table_gap: float,
+    above_table: float,
+    thickness: float,
+    cfg: CompositionConfig,
 ) -> str:
-    """Why the hand cannot make the laid-out grasp ``c`` ("" when it can)."""
+    """Why the hand cannot make the laid-out grasp ``c`` ("" when it can).
+
+    ``table_gap``: how far the hand reaches below its site in this grasp's frame; ``above_table``:
+    the site's height above the table as laid out, raised to keep that clear; ``thickness``: the
+    object's height above the table.
+    """
     if c.width >= c.opening:
         return (
             f"grasp '{c.grasp}': the object is {_cm(c.width)} cm across the jaws, wider than the "
             f"{_cm(c.opening)} cm jaw opening of the {c.side} hand"
         )
-    if kind.level and c.site[2] > top - cfg.grip_depth + _ROUNDING:
-        table = world.scenario.scene.table.height
-        need = c.site[2] - table + cfg.grip_depth
+    if above_table > thickness - cfg.grip_depth + _ROUNDING:
         return (
-            f"grasp '{c.grasp}': the object's top is {_cm(top - table)} cm above the table, lower than "
-            f"the {_cm(need)} cm the {c.side} hand needs to close level on it (it reaches "
-            f"{_cm(hand.half_thickness)} cm either side of its grasp point)"
+            f"grasp '{c.grasp}': the {_cm(thickness)} cm tall object is lower than the "
+            f"{_cm(above_table + cfg.grip_depth)} cm the {c.side} hand needs above the table to close "
+            f"on it this way (it reaches {_cm(table_gap)} cm below its grasp point)"
         )
     return ""
 
@@ -234,7 +273,7 @@ def grasp_candidates(
         ValueError: an unknown grasp name.
     """
     h = HandFrames(world)
-    hand = hand_geometry(world, side)
+    hand, points = hand_geometry(world, side), hand_points(world, side)
     pos, quat = world.object_pose(obj)
     rot = np.zeros(9)
     mujoco.mju_quat2Mat(rot, quat)
@@ -242,24 +281,24 @@ def grasp_candidates(
     geom = world.ids.object_geoms[obj]
     body = next(b for b in world.scenario.scene.objects if b.name == obj)
     table = world.scenario.scene.table.height
-    top = float(pos[2]) + half_extent(world.model, geom, obj_rot.T @ np.array([0.0, 0.0, 1.0]))
+    thickness = float(pos[2]) + half_extent(world.model, geom, obj_rot.T @ np.array([0.0, 0.0, 1.0])) - table
     out = []
     for name in names:
         kind = GRASPS.get(name)
         if kind is None:
             raise ValueError(f"unknown grasp '{name}'; grasps: {', '.join(GRASPS)}")
         approach, closing = _axes(kind, h, side, obj_rot)
+        frame = np.column_stack([np.cross(closing, approach), closing, approach])
+        below = max(0.0, -float(np.min((points @ frame.T)[:, 2])))  # the hand's reach under its site
         axis = obj_rot.T @ closing
-        tol = grasp_tolerance(world, side, obj, closing_axis_object=axis)
         width = 2.0 * half_extent(world.model, geom, axis)
-        if kind.level:
-            along = half_extent(world.model, geom, obj_rot.T @ approach)
-            site = _level_site(np.asarray(pos, dtype=float), approach, along, hand, table, table_clearance)
-        else:
-            site = np.array([pos[0], pos[1], grasp_height(body, float(pos[2]), cfg)])
-        c = GraspCandidate(name, side, site, approach, closing, width, 2.0 * tol.closing + width)
-        reason = _reason(world, kind, c, hand, top, cfg) or _reach_reason(world, h, c)
-        out.append(GraspCandidate(name, side, site, approach, closing, width, c.opening, reason))
+        opening = 2.0 * grasp_tolerance(world, side, obj, closing_axis_object=axis).closing + width
+        along = half_extent(world.model, geom, obj_rot.T @ approach)
+        site = _site(kind, body, np.asarray(pos, dtype=float), approach, along, hand, cfg)
+        site[2] = max(float(site[2]), table + table_clearance + below)
+        c = GraspCandidate(name, side, site, approach, closing, width, opening)
+        reason = _reason(c, kind, below, float(site[2]) - table, thickness, cfg) or _reach_reason(world, h, c)
+        out.append(dataclasses.replace(c, reason=reason))
     return out
 
 
@@ -278,18 +317,27 @@ def _reach_reason(world: World, h: HandFrames, c: GraspCandidate) -> str:
     )
 
 
-def rank_grasps(candidates: list[GraspCandidate], position_sigma: float, limit: int) -> list[GraspCandidate]:
+def rank_grasps(
+    candidates: list[GraspCandidate], position_sigma: float, limit: int, home_approach: FloatArray
+) -> list[GraspCandidate]:
     """The candidates of one hand with a pruning reason on all but the ``limit`` best feasible ones.
 
     Best: the smallest chance that the object's position error (``position_sigma`` per axis, m)
     exceeds the jaws' clearance along the closing axis (the grasp model's closing tolerance,
-    :func:`executive.risk.grasp_tolerance.tolerance_probabilities`); ties keep the asked order.
+    :func:`executive.risk.grasp_tolerance.tolerance_probabilities`), to a tenth of a percent;
+    then the least turn of the approach from the hand's at home (``home_approach``, its site's z):
+    the wrist's likeliest reach; then the asked order.
 
     Returns:
         The candidates in their order, the pruned ones with a ``reason`` that says so.
     """
     feasible = [c for c in candidates if not c.reason]
-    ranked = sorted(feasible, key=lambda c: c.miss_probability(position_sigma))
+
+    def score(c: GraspCandidate) -> tuple[float, float]:
+        turn = math.acos(float(np.clip(np.dot(c.approach, home_approach), -1.0, 1.0)))
+        return round(c.miss_probability(position_sigma), 3), turn
+
+    ranked = sorted(feasible, key=score)
     kept = {id(c) for c in ranked[:limit]}
     out = []
     for c in candidates:
@@ -299,7 +347,12 @@ def rank_grasps(candidates: list[GraspCandidate], position_sigma: float, limit: 
         p = c.miss_probability(position_sigma)
         reason = (
             f"pruned: the {c.side} hand plans its {limit} likeliest grasps; '{c.grasp}' misses the "
-            f"object with P {p:.3f}"
+            f"object with P {p:.3f} or turns the wrist further from home"
         )
-        out.append(GraspCandidate(c.grasp, c.side, c.site, c.approach, c.closing, c.width, c.opening, reason))
+        out.append(dataclasses.replace(c, reason=reason))
     return out
+
+
+def home_approach(world: World, side: str) -> FloatArray:
+    """The ``side`` hand's approach axis (its site's z, world) at home."""
+    return _home_frame(HandFrames(world), side)[:, 2].copy()

@@ -107,14 +107,30 @@ def hand_profile(world: World, side: str) -> tuple[float, float]:
     data = posed_hand(world, side)
     site = world.ids.hand_sites[side]
     origin, frame = data.site_xpos[site].copy(), data.site_xmat[site].reshape(3, 3)
-    geoms = hand_collision_geoms(world, side)
-    local = (np.vstack([geom_corners(world.model, data, g) for g in geoms]) - origin) @ frame
-    thickness = float(np.max(np.abs(local[:, 0])))
+    thickness = float(np.max(np.abs(hand_points(world, side)[:, 0])))
     # Rays from a pad's width about the site, back along the approach: the first hand surface.
     back = -frame[:, 2]
     starts = [origin + a * frame[:, 0] for a in np.linspace(-FAN_HALF_WIDTH, FAN_HALF_WIDTH, 5)]
+    geoms = hand_collision_geoms(world, side)
     gap = min(ray_to_hand(world.model, data, geoms, p, back) for p in starts)
     return thickness, gap
+
+
+def hand_points(world: World, side: str) -> np.ndarray:
+    """The corners (n, 3) of the ``side`` hand's collision geoms in its site frame, open and closed.
+
+    Turned into a grasp's frame they give how far the hand reaches below its site (fingers that
+    curl as they close, the Dex3's, reach further closed than open).
+    """
+    grip = world.profile.arms[side].gripper
+    site = world.ids.hand_sites[side]
+    geoms = hand_collision_geoms(world, side)
+    out = []
+    for targets in (None, tuple(grip.closed)):
+        data = posed_hand(world, side, targets)
+        origin, frame = data.site_xpos[site], data.site_xmat[site].reshape(3, 3)
+        out.append((np.vstack([geom_corners(world.model, data, g) for g in geoms]) - origin) @ frame)
+    return np.vstack(out)
 
 
 def _width_and_opening(world: World, side: str, obj: str) -> tuple[float, float]:
