@@ -133,15 +133,20 @@ def hand_points(world: World, side: str) -> np.ndarray:
     return np.vstack(out)
 
 
-def _width_and_opening(world: World, side: str, obj: str) -> tuple[float, float]:
+def _width_and_opening(
+    world: World, side: str, obj: str, closing_axis_object: tuple[float, float, float] = (0.0, 1.0, 0.0)
+) -> tuple[float, float]:
     """The object's width across the jaws and the jaw opening (m), from ``grasp_tolerance``.
 
     ``closing = (opening - width) / 2``: asked with a zero opening it gives the width; asked
     with the gripper's own opening (its slide jaws' travel, or a dexterous hand's measured
     span) the opening.
     """
-    width = -2.0 * grasp_tolerance(world, side, obj, jaw_opening=0.0).closing
-    opening = 2.0 * grasp_tolerance(world, side, obj).closing + width
+    width = (
+        -2.0
+        * grasp_tolerance(world, side, obj, jaw_opening=0.0, closing_axis_object=closing_axis_object).closing
+    )
+    opening = 2.0 * grasp_tolerance(world, side, obj, closing_axis_object=closing_axis_object).closing + width
     return width, opening
 
 
@@ -170,6 +175,7 @@ def check_grasp(
     site_above_table: float | None,
     table_clearance: float,
     grip_depth: float,
+    closing_axis_object: tuple[float, float, float] = (0.0, 1.0, 0.0),
 ) -> None:
     """Raise :class:`GraspGeometryError` if the ``side`` hand cannot grasp ``obj`` top-down.
 
@@ -182,12 +188,13 @@ def check_grasp(
             grasp away from the table (a handover), where only the width is checked.
         table_clearance: how far (m) the planner keeps the hand off the table.
         grip_depth: how far (m) under the object's top the composition puts the site.
+        closing_axis_object: the jaws' closing axis in the object's frame (default its y).
 
     Raises:
         GraspGeometryError: naming the object's width and the jaw opening, or its thickness and
             the thickness the fingers need above the table.
     """
-    width, opening = _width_and_opening(world, side, obj)
+    width, opening = _width_and_opening(world, side, obj, closing_axis_object)
     if width >= opening:
         raise GraspGeometryError(
             motion,
