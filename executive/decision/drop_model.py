@@ -38,6 +38,7 @@ from executive.risk.grasp import (
     GraspTolerance,
     approach_envelope,
     assess_grasp,
+    closing_axis,
     grasp_error,
     grasp_tolerance,
     hand_pose_at,
@@ -296,8 +297,9 @@ def _grasp(
     obj_pos, obj_quat = world.object_pose(obj)
     rotation = np.zeros(9)
     mujoco.mju_quat2Mat(rotation, obj_quat)
-    planned = grasp_error(hand_pos, hand_rot, obj_pos, rotation.reshape(3, 3))
-    full = grasp_tolerance(world, side, obj)
+    closing = closing_axis(rotation.reshape(3, 3), hand_rot)  # the grasp's own: across y or x
+    planned = grasp_error(hand_pos, hand_rot, obj_pos, rotation.reshape(3, 3), closing_axis_object=closing)
+    full = grasp_tolerance(world, side, obj, closing_axis_object=closing)
     shift = closing_shift(world, side, obj) if places else 0.0
     mu = horizontal_shift(shift, hand_rot)
     own = max(0.0, full.lateral - abs(planned.lateral))
@@ -324,7 +326,8 @@ def _grasp(
         scenario.uncertainty,
         object_pose=(reference, obj_quat),
         tolerance=tolerance,
-        approach=approach_envelope(world, side, obj, path),
+        approach=approach_envelope(world, side, obj, path, closing_axis_object=closing),
+        closing_axis_object=closing,
         **extra,
     )
     details: dict[str, float | str] = {**report.details, **placement}
