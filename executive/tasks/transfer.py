@@ -80,7 +80,7 @@ SIDESTEPS = tuple(sidestep_steps.SIDESTEPS)
 #: One-hand alternatives with a grasp other than ``top``: name -> (side, grasp).
 GRASPED = MappingProxyType({f"{side}_{g}": (side, g) for g in GRASPS if g != "top" for side in ONE_HAND})
 #: At most this many grasps of each hand are planned; the rest are pruned before planning.
-PLANNED_PER_HAND = 2
+PLANNED_PER_HAND = 3
 _GRASPS_KEY = ListOf(
     "the grasps the one-hand alternatives try, each a dimension of them (top: from above across the "
     "object's width, the alternatives left and right; any other g: alternatives left_g and right_g): "
