@@ -216,3 +216,19 @@ def test_the_humanoid_moves_the_wide_ledger_with_a_grasp_that_holds_in_physics()
     assert "wider than the 17 cm jaw opening" in offered["left_top_across"]
     assert offered["left"] == "" and offered["left_front_75"] == ""
     _placed_upright(scene, "left")
+
+
+def test_the_g1s_dex3_gets_its_candidates_from_its_own_measured_hand(g1_scenario_yaml: str) -> None:
+    g1 = build(loads(g1_scenario_yaml, source="g1_book_transfer.yaml"))
+    hand = hand_geometry(g1, "left")
+    cfg = CompositionConfig()
+    found = {
+        c.grasp: c for c in grasp_candidates(g1, "left", "book", tuple(GRASPS), cfg, table_clearance=0.01)
+    }
+    # The Dex3's opening is its measured span between thumb and fingers, not a slide jaws' travel.
+    assert found["top"].opening == pytest.approx(hand.jaw_opening, abs=1e-9)
+    assert found["top"].width == pytest.approx(0.09, abs=1e-9) and not found["top"].reason
+    # Its span (about 14.7 cm) also takes the book's 14 cm length: the same measure decides both.
+    across = found["top_across"]
+    assert across.width == pytest.approx(0.14, abs=1e-9) and across.opening == pytest.approx(hand.jaw_opening)
+    assert (across.reason == "") == (hand.jaw_opening > 0.14)
