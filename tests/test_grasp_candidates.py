@@ -232,3 +232,11 @@ def test_the_g1s_dex3_gets_its_candidates_from_its_own_measured_hand(g1_scenario
     across = found["top_across"]
     assert across.width == pytest.approx(0.14, abs=1e-9) and across.opening == pytest.approx(hand.jaw_opening)
     assert (across.reason == "") == (hand.jaw_opening > 0.14)
+
+
+def test_a_grasped_alternative_asked_for_by_name_is_laid_out_too() -> None:
+    world = _world(CAN, 0.5, "      alternatives: [left, left_top_across]")
+    task = world.scenario.mission[0]
+    assert task.grasps == ("top",) and task.alternatives == ("left", "left_top_across")
+    rows = {a.name: a.unsupported for a in task_kind("transfer").alternatives(task, world)}
+    assert rows == {"left": "", "left_top_across": ""}

@@ -219,10 +219,13 @@ HANDOVERS_SIDES = {"left_to_right": ("left", "right"), "right_to_left": ("right"
 def _with_grasps(task: Task, world: World, offered: list[Alternative]) -> list[Alternative]:
     """``offered`` and the grasped one-hand alternatives, each hand's grasps pruned before planning.
 
-    A task that asks for no grasp but ``top`` is left as it was: ``left`` and ``right`` unpruned.
+    A task that asks for no grasp but ``top`` (in ``grasps`` or by an alternative's name) is left as
+    it was: ``left`` and ``right`` unpruned.
     """
     assert isinstance(task, TransferTask)
-    if task.grasps == DEFAULT_GRASPS:
+    named = tuple(GRASPED[a][1] for a in task.alternatives if a in GRASPED)  # asked for by name
+    grasps = tuple(dict.fromkeys((*task.grasps, *named)))
+    if grasps == DEFAULT_GRASPS:
         return offered
     reasons: dict[str, str] = {}
     sigma = world.scenario.uncertainty.object_position
@@ -231,7 +234,7 @@ def _with_grasps(task: Task, world: World, offered: list[Alternative]) -> list[A
             world,
             side,
             task.object,
-            task.grasps,
+            grasps,
             CompositionConfig(),
             table_clearance=PlannerConfig().table_distance,
         )
