@@ -60,6 +60,7 @@ __all__ = [
 FloatArray = NDArray[np.float64]
 #: m of floating-point rounding in the geometry.
 _ROUNDING = 1e-6
+_Y = np.array([0.0, 1.0, 0.0])
 
 
 @dataclass(frozen=True)
@@ -282,6 +283,8 @@ def grasp_candidates(
     body = next(b for b in world.scenario.scene.objects if b.name == obj)
     table = world.scenario.scene.table.height
     thickness = float(pos[2]) + half_extent(world.model, geom, obj_rot.T @ np.array([0.0, 0.0, 1.0])) - table
+    # The hand's opening, as the grasp model has it: slide jaws' travel, else the measured span.
+    opening = 2.0 * grasp_tolerance(world, side, obj).closing + 2.0 * half_extent(world.model, geom, _Y)
     out = []
     for name in names:
         kind = GRASPS.get(name)
@@ -290,9 +293,7 @@ def grasp_candidates(
         approach, closing = _axes(kind, h, side, obj_rot)
         frame = np.column_stack([np.cross(closing, approach), closing, approach])
         below = max(0.0, -float(np.min((points @ frame.T)[:, 2])))  # the hand's reach under its site
-        axis = obj_rot.T @ closing
-        width = 2.0 * half_extent(world.model, geom, axis)
-        opening = 2.0 * grasp_tolerance(world, side, obj, closing_axis_object=axis).closing + width
+        width = 2.0 * half_extent(world.model, geom, obj_rot.T @ closing)
         along = half_extent(world.model, geom, obj_rot.T @ approach)
         site = _site(kind, body, np.asarray(pos, dtype=float), approach, along, hand, cfg)
         site[2] = max(float(site[2]), table + table_clearance + below)
