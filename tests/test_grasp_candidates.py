@@ -7,6 +7,7 @@ can and the wide ledger of issue #28 are moved in physics (exact truth) with a g
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from executive.execution.runner import run_alternative
 from executive.planning.plan import CompositionConfig
 from executive.planning.types import PlannerConfig
 from executive.report.grasp_counts import grasp_counts
+from executive.report.plots import risk_json, risk_table
 from executive.scenario import load, loads
 from executive.tasks.grasp_candidates import GRASPS, grasp_candidates, grasp_frame, home_approach, rank_grasps
 from executive.tasks.grasp_geometry import hand_geometry
@@ -180,6 +182,16 @@ def test_the_plan_counts_what_was_considered_pruned_and_planned() -> None:
     ]
     assert grasp_counts(rows) == {"considered": 3, "pruned": 1, "planned": 2, "feasible": 1}
     assert grasp_counts([AlternativeRisk("left", True, None, None, plan_s=1.0)]) is None
+    infeasible = [AlternativeRisk(r.name, False, None, None, "why", plan_s=r.plan_s) for r in rows]
+    scenario = load(SCENARIOS / "book_transfer.yaml")
+    table = risk_table(scenario, "0: transfer", infeasible)
+    assert (
+        "grasps: 3 one-hand alternatives considered, 1 pruned before planning, 2 planned (0 feasible)"
+        in table
+    )
+    machine = json.loads(risk_json(scenario, [("0: transfer", infeasible)]))
+    assert machine["tasks"][0]["grasps"] == {"considered": 3, "pruned": 1, "planned": 2, "feasible": 0}
+    assert "grasps" not in json.loads(risk_json(scenario, [("0", infeasible[:1])]))["tasks"][0]
 
 
 def test_alternatives_of_a_scene_that_asks_for_no_grasp_are_as_they_were() -> None:
