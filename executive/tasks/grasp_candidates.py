@@ -8,15 +8,21 @@ approach directions about the object and keeps the hand frames the hand can make
 * ``top_across``: from above, the jaws across the object's local x;
 * ``front``: level, along the robot's forward direction, the jaws closing level across it;
 * ``side``: level, from the hand's own side towards the midline, the jaws closing along the
-  robot's forward direction.
+  robot's forward direction;
+* ``front_45``, ``front_75``, ``side_45``, ``side_75``: those two dipping 45 or 75 deg below level
+  (the jaws still close level), for a hand whose wrist cannot come in level at the table.
+
+Of the two ways to close along an axis, a hand takes the one nearer its home pose's (a grasp from
+above the one :class:`executive.tasks.hands.HandFrames` takes, the profile's ``closing_yaw``).
 
 :func:`grasp_candidates` lays each asked grasp out for one hand and object: the hand site's
 point and frame (+z the approach, +y the closing axis, as :class:`HandFrame` has it), the
 object's width across the jaws and, when the hand cannot make it, why. The hand's measured
 geometry decides (:func:`executive.tasks.grasp_geometry.hand_geometry`: jaw opening, finger
-depth, the hand's half thickness and the free length to its palm), not constants per robot.
-:func:`rank_grasps` prunes the candidates of one hand to a bounded number, by reach and by the
-grasp model's chance that the object's position error puts it outside the jaws.
+depth, the hand's half thickness and the free length to its palm), not constants per robot; a
+site farther from the base than the hand's chain reaches is refused too. :func:`rank_grasps`
+prunes the feasible candidates of one hand to a bounded number, by the grasp model's chance that
+the object's position error puts it outside the jaws, then by the wrist's turn from home.
 
 Usage::
 
