@@ -38,6 +38,7 @@ from executive.risk.grasp import (
     GraspTolerance,
     approach_envelope,
     assess_grasp,
+    closing_axis,
     grasp_error,
     grasp_tolerance,
     hand_pose_at,
@@ -264,40 +265,39 @@ def _grasp(
 ) -> RiskReport:
     """Grasp risk measured from the grasp point the plan intends, not the object's centre.
 
-    A handover grasps the object off-centre on purpose; that planned offset is no error,
-    but it uses up part of the geometric tolerance along the same axis.
+    A handover grasps the object off-centre on purpose: no error, but it uses up tolerance there.
 
-    The object's error along the jaws (the lateral axis) is not corrected by closing them:
-    the hand carries it to the target, so the object rests that far from it. The drop
-    mode's failures include a placement beyond the failure detector's
-    ``place_position_tol``; the same error ``e`` fails the grasp when ``|e|`` exceeds the
-    lateral tolerance, so the union of the two is ``|e| > min(lateral, place_position_tol)``
-    (exact: nested events of one Gaussian, not a bound). A thumb-against-fingers hand holds
-    the object off its site across the jaws (:func:`executive.risk.pinch.closing_shift`); that
-    shift's table-plane part ``mu`` lands on the target too, and the placement's bound on
-    ``|e|`` becomes sqrt(place_position_tol^2 - mu^2) (:func:`executive.risk.pinch.placement_tolerance`;
-    slide jaws: mu = 0). ``places`` False (a pick that keeps the object): no placement, the
-    lateral tolerance is the grasp's own.
+    The object's error along the jaws (the lateral axis) is not corrected by closing them: the hand
+    carries it to the target, so the object rests that far from it. The drop mode's failures include a
+    placement beyond the failure detector's ``place_position_tol``; the same error ``e`` fails the grasp
+    when ``|e|`` exceeds the lateral tolerance, so the union of the two is ``|e| > min(lateral,
+    place_position_tol)`` (exact: nested events of one Gaussian, not a bound). A thumb-against-fingers
+    hand holds the object off its site across the jaws (:func:`executive.risk.pinch.closing_shift`);
+    that shift's table-plane part ``mu`` lands on the target too, and the placement's bound on ``|e|``
+    becomes sqrt(place_position_tol^2 - mu^2) (:func:`executive.risk.pinch.placement_tolerance`; slide
+    jaws: mu = 0). ``places`` False (a pick that keeps the object): no placement, the lateral tolerance
+    is the grasp's own.
 
-    Across the jaws, the hand must clear the object's sides all the way down, not only at
-    the grasp pose: ``path`` (the grasping hand's poses before the grasp, e.g. its pre-grasp
-    and approach knots) gives the envelope its geoms sweep below the object's top
-    (:func:`executive.risk.grasp.approach_envelope`), and the offset and yaw errors are
-    scored jointly against it (:func:`executive.risk.grasp.approach_miss_probability`).
+    Across the jaws, the hand must clear the object's sides all the way down, not only at the grasp pose:
+    ``path`` (the grasping hand's poses before the grasp, e.g. its pre-grasp and approach knots) gives the
+    envelope its geoms sweep below the object's top (:func:`executive.risk.grasp.approach_envelope`), and
+    the offset and yaw errors are scored jointly against it
+    (:func:`executive.risk.grasp.approach_miss_probability`).
 
-    ``execution`` (the hand's predicted errors) moves the approach's window by the hand's error
-    at the end of ``approach`` and adds its spread; the lateral error then lands on the target
-    with the place's (``place``, the trajectory that sets the object down) hand error and the
-    release's spread (:func:`executive.risk.placement_spread.misplace_probability`: no longer one
-    Gaussian's nested events). None: the plan as if executed exactly.
+    ``execution`` (the hand's predicted errors) moves the approach's window by the hand's error at the end
+    of ``approach`` and adds its spread; the lateral error then lands on the target with the place's
+    (``place``, the trajectory that sets the object down) hand error and the release's spread
+    (:func:`executive.risk.placement_spread.misplace_probability`). None: as if executed exactly. Every
+    axis is the grasp's own (:func:`executive.risk.grasp.closing_axis`).
     """
     scenario = world.scenario
     hand_pos, hand_rot = hand_pose_at(world, approach, side)
     obj_pos, obj_quat = world.object_pose(obj)
     rotation = np.zeros(9)
     mujoco.mju_quat2Mat(rotation, obj_quat)
-    planned = grasp_error(hand_pos, hand_rot, obj_pos, rotation.reshape(3, 3))
-    full = grasp_tolerance(world, side, obj)
+    closing = closing_axis(rotation.reshape(3, 3), hand_rot)
+    planned = grasp_error(hand_pos, hand_rot, obj_pos, rotation.reshape(3, 3), closing_axis_object=closing)
+    full = grasp_tolerance(world, side, obj, closing_axis_object=closing)
     shift = closing_shift(world, side, obj) if places else 0.0
     mu = horizontal_shift(shift, hand_rot)
     own = max(0.0, full.lateral - abs(planned.lateral))
@@ -324,7 +324,8 @@ def _grasp(
         scenario.uncertainty,
         object_pose=(reference, obj_quat),
         tolerance=tolerance,
-        approach=approach_envelope(world, side, obj, path),
+        approach=approach_envelope(world, side, obj, path, closing_axis_object=closing),
+        closing_axis_object=closing,
         **extra,
     )
     details: dict[str, float | str] = {**report.details, **placement}

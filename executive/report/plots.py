@@ -16,6 +16,7 @@ import numpy as np
 
 from executive.decision.assessment import AlternativeRisk
 from executive.decision.physics_check import physics_text
+from executive.report.grasp_counts import grasp_counts, grasp_counts_text
 from executive.risk.collision import breach_summary
 from executive.schema.failure_modes import failure_modes, mode_names
 from executive.schema.types import Scenario
@@ -108,6 +109,9 @@ def risk_table(
             )
         if alt.physics is not None:
             lines.append(f"  {'':<15}{physics_text(alt.physics)}{_fused_text(alt.physics)}")
+    counts = grasp_counts(alternatives)
+    if counts is not None:
+        lines.append(grasp_counts_text(counts))
     lines.append(
         f"{'/'.join(mode_names())}/P(any): probabilities; seed sum: the seed's weighted sum; {legend}"
     )
@@ -168,7 +172,11 @@ def risk_json(scenario: Scenario, tasks: Sequence[tuple[str, Sequence[Alternativ
                 row["plan_s"] = alt.plan_s
                 row["assess_s"] = alt.assess_s
             rows.append(row)
-        out["tasks"].append({"task": label, "alternatives": rows})
+        task: dict[str, Any] = {"task": label, "alternatives": rows}
+        counts = grasp_counts(alternatives)
+        if counts is not None:  # a task that asked for grasps: how many were pruned and planned
+            task["grasps"] = counts
+        out["tasks"].append(task)
     return json.dumps(out, indent=2)
 
 

@@ -35,6 +35,7 @@ from executive.risk.grasp_seed import expected_seed_risk, logistic_risk, seed_gr
 from executive.risk.grasp_tolerance import (
     GraspError,
     GraspTolerance,
+    closing_axis,
     grasp_error,
     grasp_tolerance,
     has_slide_jaws,
@@ -56,6 +57,7 @@ __all__ = [
     "approach_envelope",
     "approach_miss_probability",
     "assess_grasp",
+    "closing_axis",
     "expected_seed_risk",
     "grasp_error",
     "grasp_from_physics",

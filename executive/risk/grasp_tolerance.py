@@ -25,8 +25,10 @@ from executive.risk.model_geometry import half_extent
 from executive.world.model import World
 
 __all__ = [
+    "AXIS_SNAP",
     "GraspError",
     "GraspTolerance",
+    "closing_axis",
     "grasp_error",
     "grasp_tolerance",
     "has_slide_jaws",
@@ -35,6 +37,9 @@ __all__ = [
 ]
 
 FloatArray = NDArray[np.float64]
+#: A hand's closing axis within this angle of the object's y is taken as its y (the grasp across
+#: its width that the hand meant; the residual turn is the yaw error the tolerances judge).
+AXIS_SNAP = np.radians(10.0)
 
 
 @dataclass(frozen=True)
@@ -126,6 +131,19 @@ def has_slide_jaws(world: World, side: str) -> bool:
         and model.jnt_type[int(model.actuator_trnid[a, 0])] == mujoco.mjtJoint.mjJNT_SLIDE
         for a in acts
     )
+
+
+def closing_axis(object_rotation: FloatArray, hand_rotation: FloatArray) -> tuple[float, float, float]:
+    """The axis (object frame, unit) the hand's jaws close along: its site's y turned into the object's frame.
+
+    Within :data:`AXIS_SNAP` of the object's y either way it is that y, (0, 1, 0): a grasp across
+    the object's width, as every grasp from above closes.
+    """
+    axis = np.asarray(object_rotation, dtype=float).T @ np.asarray(hand_rotation, dtype=float)[:, 1]
+    if abs(float(axis[1])) >= float(np.cos(AXIS_SNAP)):
+        return (0.0, 1.0, 0.0)
+    axis /= float(np.linalg.norm(axis))
+    return (float(axis[0]), float(axis[1]), float(axis[2]))
 
 
 def grasp_tolerance(

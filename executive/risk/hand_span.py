@@ -27,7 +27,7 @@ from executive.risk.model_geometry import geom_corners
 from executive.world.model import World
 from executive.world.scratch import scratch_data
 
-__all__ = ["HandSpan", "hand_collision_geoms", "hand_span", "pose_hand", "posed_hand"]
+__all__ = ["HandSpan", "hand_collision_geoms", "hand_span", "pose_hand", "posed_hand", "ray_to_hand"]
 
 FloatArray = NDArray[np.float64]
 
@@ -93,7 +93,7 @@ def pose_hand(world: World, side: str, targets: tuple[float, ...] | None, data: 
     mujoco.mj_kinematics(model, data)
 
 
-def _ray(
+def ray_to_hand(
     model: mujoco.MjModel, data: mujoco.MjData, geoms: list[int], start: FloatArray, way: FloatArray
 ) -> float:
     """Distance from ``start`` along the unit vector ``way`` to the first of ``geoms`` (inf: none)."""
@@ -141,6 +141,6 @@ def hand_span(world: World, side: str, *, closed: bool = False) -> HandSpan:
             for a in np.linspace(-FAN_HALF_WIDTH, FAN_HALF_WIDTH, 5)
             for b in np.linspace(0.0, depth, 3)
         ]
-        near = min(_ray(model, data, geoms, p, closing) for p in starts)
-        far = min(_ray(model, data, geoms, p, -closing) for p in starts)
+        near = min(ray_to_hand(model, data, geoms, p, closing) for p in starts)
+        far = min(ray_to_hand(model, data, geoms, p, -closing) for p in starts)
     return HandSpan(opening=near + far, near=near, far=far, finger_depth=depth)

@@ -23,12 +23,22 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from executive.planning.types import PlanningError
 from executive.risk.grasp import grasp_tolerance
-from executive.risk.hand_span import hand_span
+from executive.risk.hand_span import FAN_HALF_WIDTH, hand_collision_geoms, hand_span, posed_hand, ray_to_hand
+from executive.risk.model_geometry import geom_corners
 from executive.world.model import World
 
-__all__ = ["GraspGeometryError", "HandGeometry", "check_grasp", "hand_geometry", "min_thickness"]
+__all__ = [
+    "GraspGeometryError",
+    "HandGeometry",
+    "check_grasp",
+    "hand_geometry",
+    "hand_profile",
+    "min_thickness",
+]
 
 
 #: m of floating-point rounding in the geometry (box corners and targets from rotations).
@@ -50,10 +60,16 @@ class HandGeometry:
         jaw_opening: free span between the open jaws along the site's closing axis (y),
             through the site; inf when nothing of the hand closes across the site.
         finger_depth: how far the hand reaches past its site along the approach (site z).
+        half_thickness: how far the hand reaches from its site either way across the approach
+            and the closing axis (site x, the larger side): below the site in a grasp from the side.
+        palm_gap: free length from the site back along the approach to the palm (the deepest an
+            object may reach into the hand past the site).
     """
 
     jaw_opening: float
     finger_depth: float
+    half_thickness: float = 0.0
+    palm_gap: float = float("inf")
 
 
 def hand_geometry(world: World, side: str) -> HandGeometry:
@@ -72,18 +88,65 @@ def hand_geometry(world: World, side: str) -> HandGeometry:
         The hand's :class:`HandGeometry`.
     """
     span, closed = hand_span(world, side), hand_span(world, side, closed=True)
-    return HandGeometry(jaw_opening=span.opening, finger_depth=max(span.finger_depth, closed.finger_depth))
+    thickness, palm = hand_profile(world, side)
+    return HandGeometry(
+        jaw_opening=span.opening,
+        finger_depth=max(span.finger_depth, closed.finger_depth),
+        half_thickness=thickness,
+        palm_gap=palm,
+    )
 
 
-def _width_and_opening(world: World, side: str, obj: str) -> tuple[float, float]:
+def hand_profile(world: World, side: str) -> tuple[float, float]:
+    """The open ``side`` hand's half thickness along its site's x and its palm gap (m).
+
+    Measured on the model at the home keyframe: the hand's collision geoms' bounding-box corners
+    in the site frame give the thickness; a fan of rays from the site's region back along -z
+    (:func:`executive.risk.hand_span.ray_to_hand`) the nearest surface behind the site.
+    """
+    data = posed_hand(world, side)
+    site = world.ids.hand_sites[side]
+    origin, frame = data.site_xpos[site].copy(), data.site_xmat[site].reshape(3, 3)
+    thickness = float(np.max(np.abs(hand_points(world, side)[:, 0])))
+    # Rays from a pad's width about the site, back along the approach: the first hand surface.
+    back = -frame[:, 2]
+    starts = [origin + a * frame[:, 0] for a in np.linspace(-FAN_HALF_WIDTH, FAN_HALF_WIDTH, 5)]
+    geoms = hand_collision_geoms(world, side)
+    gap = min(ray_to_hand(world.model, data, geoms, p, back) for p in starts)
+    return thickness, gap
+
+
+def hand_points(world: World, side: str) -> np.ndarray:
+    """The corners (n, 3) of the ``side`` hand's collision geoms in its site frame, open and closed.
+
+    Turned into a grasp's frame they give how far the hand reaches below its site (fingers that
+    curl as they close, the Dex3's, reach further closed than open).
+    """
+    grip = world.profile.arms[side].gripper
+    site = world.ids.hand_sites[side]
+    geoms = hand_collision_geoms(world, side)
+    out = []
+    for targets in (None, tuple(grip.closed)):
+        data = posed_hand(world, side, targets)
+        origin, frame = data.site_xpos[site], data.site_xmat[site].reshape(3, 3)
+        out.append((np.vstack([geom_corners(world.model, data, g) for g in geoms]) - origin) @ frame)
+    return np.vstack(out)
+
+
+def _width_and_opening(
+    world: World, side: str, obj: str, closing_axis_object: tuple[float, float, float] = (0.0, 1.0, 0.0)
+) -> tuple[float, float]:
     """The object's width across the jaws and the jaw opening (m), from ``grasp_tolerance``.
 
     ``closing = (opening - width) / 2``: asked with a zero opening it gives the width; asked
     with the gripper's own opening (its slide jaws' travel, or a dexterous hand's measured
     span) the opening.
     """
-    width = -2.0 * grasp_tolerance(world, side, obj, jaw_opening=0.0).closing
-    opening = 2.0 * grasp_tolerance(world, side, obj).closing + width
+    width = (
+        -2.0
+        * grasp_tolerance(world, side, obj, jaw_opening=0.0, closing_axis_object=closing_axis_object).closing
+    )
+    opening = 2.0 * grasp_tolerance(world, side, obj, closing_axis_object=closing_axis_object).closing + width
     return width, opening
 
 
@@ -112,6 +175,7 @@ def check_grasp(
     site_above_table: float | None,
     table_clearance: float,
     grip_depth: float,
+    closing_axis_object: tuple[float, float, float] = (0.0, 1.0, 0.0),
 ) -> None:
     """Raise :class:`GraspGeometryError` if the ``side`` hand cannot grasp ``obj`` top-down.
 
@@ -124,12 +188,13 @@ def check_grasp(
             grasp away from the table (a handover), where only the width is checked.
         table_clearance: how far (m) the planner keeps the hand off the table.
         grip_depth: how far (m) under the object's top the composition puts the site.
+        closing_axis_object: the jaws' closing axis in the object's frame (default its y).
 
     Raises:
         GraspGeometryError: naming the object's width and the jaw opening, or its thickness and
             the thickness the fingers need above the table.
     """
-    width, opening = _width_and_opening(world, side, obj)
+    width, opening = _width_and_opening(world, side, obj, closing_axis_object)
     if width >= opening:
         raise GraspGeometryError(
             motion,

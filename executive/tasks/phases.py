@@ -218,14 +218,17 @@ def one_hand_layout(
     start: tuple[FloatArray, float],
     end: tuple[FloatArray, float],
     cfg: CompositionConfig,
+    grasp_z: float | None = None,
 ) -> OneHandLayout:
     """The pick, lane and place of one hand moving ``body`` from ``start`` to ``end`` (centre, yaw).
 
     The lane runs in front of what the carry would pass, the carried object skirting the
-    obstacles' front at ``obstacle_clearance`` (:func:`carry_lane_front`).
+    obstacles' front at ``obstacle_clearance`` (:func:`carry_lane_front`). ``grasp_z``: the hand
+    site's height at the grasp (None: a top-down grasp's, :func:`grasp_height`).
     """
     (pos, _), (centre, _) = start, end
-    grasp = np.array([pos[0], pos[1], grasp_height(body, float(pos[2]), cfg)])
+    z = grasp_height(body, float(pos[2]), cfg) if grasp_z is None else grasp_z
+    grasp = np.array([pos[0], pos[1], z])
     place_at = centre + (grasp[2] - pos[2]) * UP
     carry_z = max(grasp[2] + cfg.lift_height, place_at[2] + cfg.approach_height)
     length = body.size[0] if body.shape == "box" else 2 * body.size[0]

@@ -10,6 +10,7 @@ after another with the whole-body planner into an
 
 from __future__ import annotations
 
+import mujoco
 import numpy as np
 from numpy.typing import NDArray
 
@@ -26,6 +27,8 @@ from executive.world.model import World
 __all__ = ["build_subtree", "check_grasps", "plan_alternative", "plan_walk"]
 
 FloatArray = NDArray[np.float64]
+#: A hand whose approach axis is within this (1 - cos) of straight down grasps from above.
+_ROUNDING = 1e-6
 
 
 def plan_alternative(
@@ -94,7 +97,10 @@ def check_grasps(world: World, steps: list[Step], table_clearance: float, grip_d
     Each is checked with :func:`executive.tasks.grasp_geometry.check_grasp`.
 
     The first grasp takes the object off the table: its site height above the table top is the
-    approach's target; later grasps (a handover) are in the air, checked for width only.
+    approach's target, the width the object's across the target's closing axis; a grasp that does
+    not come straight down (:mod:`executive.tasks.grasp_candidates` laid it out clear of the table)
+    is checked for width only. Later grasps (a handover) are in the air, checked for width only,
+    across the object's y.
 
     Raises:
         GraspGeometryError: the first grasp the hand cannot make, with the reason.
@@ -106,13 +112,22 @@ def check_grasps(world: World, steps: list[Step], table_clearance: float, grip_d
             continue
         approach = next(s for s in reversed(steps[:i]) if s.side == step.side and s.targets)
         site = next(t for t in approach.targets if t.side == step.side)
+        closing, straight_down = (0.0, 1.0, 0.0), True
+        if on_table:  # the object as it rests (in the air a handover has turned it: across its y)
+            hand, obj = np.zeros(9), np.zeros(9)
+            mujoco.mju_quat2Mat(hand, np.asarray(site.quat, dtype=float))
+            mujoco.mju_quat2Mat(obj, world.object_pose(step.obj)[1])
+            axis = obj.reshape(3, 3).T @ hand.reshape(3, 3)[:, 1]
+            closing = (float(axis[0]), float(axis[1]), float(axis[2]))
+            straight_down = float(hand[8]) < -1.0 + _ROUNDING
         check_grasp(
             world,
             step.side,
             step.obj,
             motion=approach.name,
-            site_above_table=float(site.position[2]) - table if on_table else None,
+            site_above_table=float(site.position[2]) - table if on_table and straight_down else None,
             table_clearance=table_clearance,
             grip_depth=grip_depth,
+            closing_axis_object=closing,
         )
         on_table = False

@@ -16,6 +16,12 @@ Alternatives (names stable; Long et al. 2018, section "Total risk"):
   Planned only where the one-arm alternative of that hand cannot be (``instead_of``): the
   place beyond that hand's reach from where the robot stands.
 
+With a grasp (``grasps``, :mod:`executive.tasks.grasp_candidates`) the one-hand alternatives are
+arm x grasp: ``left`` and ``right`` grasp from above across the object's width (``top``, the
+default); ``<side>_<grasp>`` (``left_front_75``, ``right_side``) with the other grasps asked for.
+Before planning each hand's grasps are pruned, with the reason on their rows: those the hand
+cannot make (too wide, too low, out of reach) and all but its :data:`PLANNED_PER_HAND` likeliest.
+
 A one-arm robot offers its one hand; a robot's profile may declare any of them unsupported.
 An object already in a hand (a re-plan after a failed handover) is put down by that hand
 (``left`` or ``right``: lane carry and place from where it is); the others are then unsupported.
@@ -31,7 +37,8 @@ import numpy as np
 
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import HandTarget, PlanningError
-from executive.schema.declarations import Block
+from executive.planning.types import PlannerConfig
+from executive.schema.declarations import Block, Choice, ListOf
 from executive.schema.scene_keys import OBJECT_NAME, TARGET, TO_YAW
 from executive.schema.types import SceneConfig
 from executive.schema.yaml_nodes import Node
@@ -39,6 +46,15 @@ from executive.tasks import handover as handover_steps
 from executive.tasks import regrasp as regrasp_steps
 from executive.tasks import sidestep as sidestep_steps
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
+from executive.tasks.grasp_candidates import (
+    DEFAULT_GRASPS,
+    GRASPS,
+    grasp_candidates,
+    home_approach,
+    rank_grasps,
+)
+from executive.tasks.grasp_geometry import GraspGeometryError
+from executive.tasks.grasp_leg import grasp_leg
 from executive.tasks.hands import ONE_HAND, HandFrames
 from executive.tasks.phases import one_hand_leg
 from executive.tasks.pick_place import PlaceTask, place_steps, site_offset
@@ -46,11 +62,32 @@ from executive.tasks.placement import placed_verdict, target_placement
 from executive.world.heading import yaw_of
 from executive.world.model import World
 
-__all__ = ["HANDOVERS", "REGRASPS", "SIDESTEPS", "TransferKind", "TransferTask", "transfer_steps"]
+__all__ = [
+    "GRASPED",
+    "HANDOVERS",
+    "PLANNED_PER_HAND",
+    "REGRASPS",
+    "SIDESTEPS",
+    "TransferKind",
+    "TransferTask",
+    "grasp_alternatives",
+    "transfer_steps",
+]
 
 HANDOVERS = ("left_to_right", "right_to_left")
 REGRASPS = tuple(regrasp_steps.REGRASPS)
 SIDESTEPS = tuple(sidestep_steps.SIDESTEPS)
+#: One-hand alternatives with a grasp other than ``top``: name -> (side, grasp).
+GRASPED = MappingProxyType({f"{side}_{g}": (side, g) for g in GRASPS if g != "top" for side in ONE_HAND})
+#: At most this many grasps of each hand are planned; the rest are pruned before planning.
+PLANNED_PER_HAND = 3
+_GRASPS_KEY = ListOf(
+    "the grasps the one-hand alternatives try, each a dimension of them (top: from above across the "
+    "object's width, the alternatives left and right; any other g: alternatives left_g and right_g): "
+    + "; ".join(f"{k.name}: {k.description}" for k in GRASPS.values()),
+    Choice("a grasp", lambda: tuple(GRASPS)),
+    min_len=1,
+)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -62,17 +99,33 @@ class TransferTask(Task):
     # clear of obstacles and other objects; with z it must rest on the table or on something on it
     to: tuple[float, float, float | None]
     to_yaw_rad: float | None = None  # None: keep the object's yaw; [-360, 360] deg in YAML
+    grasps: tuple[str, ...] = DEFAULT_GRASPS  # the grasps the one-hand alternatives try
 
     def label(self) -> str:
         to = ", ".join(f"{v:.2f}" for v in self.to if v is not None)
         return f"transfer {self.object} to ({to})"
 
 
+def grasp_alternatives(alternatives: tuple[str, ...], grasps: tuple[str, ...]) -> tuple[str, ...]:
+    """``alternatives`` with each one-hand one (``left``, ``right``) as one per grasp, in order."""
+    out: list[str] = []
+    for name in alternatives:
+        if name not in ONE_HAND:
+            out.append(name)
+            continue
+        out += [
+            name if g == "top" else f"{name}_{g}"
+            for g in grasps
+            if (name if g == "top" else f"{name}_{g}") not in out
+        ]
+    return tuple(out)
+
+
 class TransferKind(TaskKind):
     """Move an object to a target pose: one hand, or two with a handover or a regrasp."""
 
     name = "transfer"
-    alternative_names = (*ONE_HAND, *HANDOVERS, *REGRASPS, *SIDESTEPS)
+    alternative_names = (*ONE_HAND, *HANDOVERS, *REGRASPS, *SIDESTEPS, *GRASPED)
     default_alternatives = ("left", "right", "left_to_right", *SIDESTEPS)
     instead_of = MappingProxyType(dict(sidestep_steps.SIDESTEPS))
     keys = Block(
@@ -86,9 +139,10 @@ class TransferKind(TaskKind):
             "to": TARGET,
             "to_yaw": TO_YAW,
             "alternatives": alternatives_key(alternative_names),
+            "grasps": _GRASPS_KEY,
         },
         required=("object", "to"),
-        defaults={"alternatives": list(default_alternatives)},
+        defaults={"alternatives": list(default_alternatives), "grasps": list(DEFAULT_GRASPS)},
     )
 
     def read(self, node: Node, scene: SceneConfig) -> Task:
@@ -97,11 +151,20 @@ class TransferKind(TaskKind):
 
         self.keys.check_keys(node)
         name, to, yaw = read_target(node, scene)
+        grasps_node = node.opt("grasps")
+        grasps = DEFAULT_GRASPS
+        if grasps_node is not None:
+            grasps = _GRASPS_KEY.read(grasps_node)
+            for i, g in enumerate(grasps):
+                if g in grasps[:i]:
+                    grasps_node.fail(f"grasp '{g}' is listed twice")
+        alternatives = self.read_alternatives(node, self.default_alternatives)
         return TransferTask(
             object=name,
             to=to,
             to_yaw_rad=yaw,
-            alternatives=self.read_alternatives(node, self.default_alternatives),
+            alternatives=grasp_alternatives(alternatives, grasps),
+            grasps=grasps,
         )
 
     def offered(self, task: Task, world: World) -> list[Alternative]:
@@ -115,7 +178,7 @@ class TransferKind(TaskKind):
             out.append(Alternative(name, sidestep_steps.cannot_sidestep(world, side)))
         holder = world.held_by(task.object)
         if holder is None:
-            return out
+            return _with_grasps(task, world, out)
         # Already in a hand (a re-plan after a failed handover, say): that hand puts it down.
         held = f"'{task.object}' is in the {holder} hand: only '{holder}' starts there (placing it)"
         return [a if a.name == holder or a.unsupported else Alternative(a.name, held) for a in out]
@@ -131,6 +194,8 @@ class TransferKind(TaskKind):
             return [*clear, *place_steps(world, place, alternative, config)]
         if alternative in ONE_HAND:
             return one_hand_steps(world, task, alternative, config)
+        if alternative in GRASPED:
+            return grasped_steps(world, task, *GRASPED[alternative], config)
         if alternative in HANDOVERS:
             giver, receiver = HANDOVERS_SIDES[alternative]
             return handover_steps.transfer(world, task, giver, receiver, config)
@@ -149,6 +214,56 @@ class TransferKind(TaskKind):
 
 
 HANDOVERS_SIDES = {"left_to_right": ("left", "right"), "right_to_left": ("right", "left")}
+
+
+def _with_grasps(task: Task, world: World, offered: list[Alternative]) -> list[Alternative]:
+    """``offered`` and the grasped one-hand alternatives, each hand's grasps pruned before planning.
+
+    A task that asks for no grasp but ``top`` (in ``grasps`` or by an alternative's name) is left as
+    it was: ``left`` and ``right`` unpruned.
+    """
+    assert isinstance(task, TransferTask)
+    named = tuple(GRASPED[a][1] for a in task.alternatives if a in GRASPED)  # asked for by name
+    grasps = tuple(dict.fromkeys((*task.grasps, *named)))
+    if grasps == DEFAULT_GRASPS:
+        return offered
+    reasons: dict[str, str] = {}
+    sigma = world.scenario.uncertainty.object_position
+    for side in world.profile.sides:
+        candidates = grasp_candidates(
+            world,
+            side,
+            task.object,
+            grasps,
+            CompositionConfig(),
+            table_clearance=PlannerConfig().table_distance,
+        )
+        for c in rank_grasps(candidates, sigma, PLANNED_PER_HAND, home_approach(world, side)):
+            reasons[side if c.grasp == "top" else f"{side}_{c.grasp}"] = c.reason
+    out = [Alternative(a.name, a.unsupported or reasons.get(a.name, "")) for a in offered]
+    missing = f"robot '{world.profile.name}' has no such arm"
+    return out + [Alternative(name, reasons.get(name, missing)) for name in GRASPED]
+
+
+def grasped_steps(
+    world: World, task: TransferTask, side: str, grasp: str, cfg: CompositionConfig
+) -> list[Step]:
+    """One hand moves the object with ``grasp`` (:func:`executive.tasks.grasp_leg.grasp_leg`).
+
+    Raises:
+        GraspGeometryError: the hand cannot make that grasp (the candidate's reason).
+    """
+    body = next(b for b in world.scenario.scene.objects if b.name == task.object)
+    pos, quat = world.object_pose(task.object)
+    candidate = grasp_candidates(
+        world, side, task.object, (grasp,), cfg, table_clearance=PlannerConfig().table_distance
+    )[0]
+    if candidate.reason:
+        raise GraspGeometryError(f"{side}.approach", side, candidate.reason)
+    target = target_placement(world, body, task.to, task.to_yaw_rad, 0.0)
+    return grasp_leg(
+        HandFrames(world), side, body, (pos, yaw_of(quat)), (target.centre, target.yaw), candidate, cfg
+    )
 
 
 def one_hand_steps(world: World, task: TransferTask, side: str, cfg: CompositionConfig) -> list[Step]:
