@@ -67,7 +67,10 @@ def test_an_alternative_whose_dry_run_fails_is_never_executed(tmp_path: Path) ->
     table = request_table(
         ApprovalRequest(**{**request, "alternatives": tuple(Row(**r) for r in request["alternatives"])})
     )
-    assert re.search(r"dry run: ok; [234] rollouts", table) and "fails in simulation with the scene as estimated" in table
+    assert (
+        re.search(r"dry run: ok; [234] rollouts", table)
+        and "fails in simulation with the scene as estimated" in table
+    )
 
 
 def _one_alternative(count: int) -> tuple[Scenario, dict[str, Any], dict[str, Any]]:
@@ -92,7 +95,9 @@ def test_rollouts_are_seeded_and_fused_with_their_counts() -> None:
     ]
     first, second = (r.alternatives["left_to_right"] for r in runs)
     assert first.counts == second.counts and sum(first.counts.values()) == 3
-    assert runs[0].stopped == "clear"  # one alternative: nothing to choose between once min_count is met
+    # One alternative: nothing to choose between, but its approval is unsure (expected loss ~0.15
+    # against the threshold 0.3 with a prior of 10 trials): it goes on to the cap.
+    assert runs[0].stopped == "count" and first.stopped == "count"
     cfg = scenario.risk.rollouts
     w, n = cfg.prior_weight, 3
     drops = first.counts.get("drop", 0)

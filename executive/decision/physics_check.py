@@ -363,29 +363,30 @@ def _roll_out(
 ) -> None:
     """Rounds of rollouts, each for the alternatives the allocation keeps going
     (:func:`executive.decision.rollout_allocation.allocate`), until none is left or the next
-    round would overrun the time budget (once every alternative has its minimum)."""
+    round would overrun the time budget (once every alternative has its minimum; a round's
+    time is foreseen from the last one's, per job)."""
     cfg, risk = scenario.risk.rollouts, scenario.risk
-    results, t0, round_s = verdict.alternatives, clock(), 0.0
+    results, t0 = verdict.alternatives, clock()
     by_name = {plan.name: plan for plan in plans}
-    state = dict.fromkeys(by_name, GOING)
+    state, job_s = dict.fromkeys(by_name, GOING), 0.0  # wall time of the last round per job
     while going := [name for name, why in state.items() if why == GOING]:
-        short = any(results[name].rollouts < cfg.min_count for name in going)
-        if round_s > 0 and not short and clock() - t0 + round_s > cfg.budget_s:
-            state.update(dict.fromkeys(going, "budget"))
-            break
         jobs = [
             RolloutJob(scenario, by_name[name], rollout_seed(scenario.trials.seed, j), q_start)
             for k in range(cfg.batch)
             for name in going
             if (j := results[name].rollouts + k) < cfg.count
         ]
+        short = any(results[name].rollouts < cfg.min_count for name in going)
+        if not short and clock() - t0 + job_s * len(jobs) > cfg.budget_s:
+            state.update(dict.fromkeys(going, "budget"))
+            break
         started = clock()
         for job, record in zip(jobs, run_map(jobs), strict=True):
             result = results[job.plan.name]
             result.counts[record["outcome"]] += 1
             result.rollouts += 1
             verdict.physics_steps += int(record.get("physics_steps", 0))
-        round_s = clock() - started
+        job_s = (clock() - started) / len(jobs)
         view = _contention(results, plans, risk)
         verdict.confidence, verdict.opportunity_cost = view.choice.confidence, view.choice.opportunity_cost
         state = allocate(view, {name: results[name].rollouts for name in by_name}, cfg)
