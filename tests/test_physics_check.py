@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from pathlib import Path
 from typing import Any
 
@@ -58,14 +59,18 @@ def test_an_alternative_whose_dry_run_fails_is_never_executed(tmp_path: Path) ->
     request = next(e for e in lines if e["kind"] == "approval_request")["request"]
     rows = {r["name"]: r for r in request["alternatives"]}
     assert not rows["left_to_right"]["feasible"] and rows["left_to_right"]["reason"] == handover["reason"]
-    assert rows["left"]["physics"].startswith("dry run: ok; 4 rollouts: ")
+    # two to four rollouts: the minimum, more while the choice or the approval is unsure
+    assert re.match(r"dry run: ok; [234] rollouts: ", rows["left"]["physics"])
     from executive.decision.approval import AlternativeRisk as Row
     from executive.decision.approval import ApprovalRequest, request_table
 
     table = request_table(
         ApprovalRequest(**{**request, "alternatives": tuple(Row(**r) for r in request["alternatives"])})
     )
-    assert "dry run: ok; 4 rollouts" in table and "fails in simulation with the scene as estimated" in table
+    assert (
+        re.search(r"dry run: ok; [234] rollouts", table)
+        and "fails in simulation with the scene as estimated" in table
+    )
 
 
 def _one_alternative(count: int) -> tuple[Scenario, dict[str, Any], dict[str, Any]]:
@@ -82,13 +87,17 @@ def _one_alternative(count: int) -> tuple[Scenario, dict[str, Any], dict[str, An
 def test_rollouts_are_seeded_and_fused_with_their_counts() -> None:
     """Same seed, same truths, same counts; the fused risk is the posterior of those counts."""
     scenario, plans, analytic = _one_alternative(3)
+    rollouts = dataclasses.replace(scenario.risk.rollouts, min_count=3)
+    scenario = dataclasses.replace(scenario, risk=dataclasses.replace(scenario.risk, rollouts=rollouts))
     runs = [
         check_alternatives(plans, analytic, scenario, lambda jobs: [run_job(j) for j in jobs])
         for _ in range(2)
     ]
     first, second = (r.alternatives["left_to_right"] for r in runs)
     assert first.counts == second.counts and sum(first.counts.values()) == 3
-    assert runs[0].stopped == "clear"  # one alternative: nothing to choose between once min_count is met
+    # One alternative: nothing to choose between, but its approval is unsure (expected loss ~0.15
+    # against the threshold 0.3 with a prior of 10 trials): it goes on to the cap.
+    assert runs[0].stopped == "count" and first.stopped == "count"
     cfg = scenario.risk.rollouts
     w, n = cfg.prior_weight, 3
     drops = first.counts.get("drop", 0)

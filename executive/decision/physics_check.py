@@ -5,9 +5,13 @@ Every feasible alternative is first *dry-run*: executed once in MuJoCo on the es
 (:func:`executive.execution.runner.execute_plan`). A plan that fails with perfect knowledge is
 infeasible. Then, when ``risk.rollouts.count`` > 0, *rollouts*: the surviving alternatives
 executed on truths sampled from the scenario's uncertainty (the campaign's sampler), in rounds
-of ``batch`` per alternative, until the stopping rule of :mod:`executive.risk.fusion` calls
-the choice clear, ``count`` is reached, or the next round would overrun ``budget_s``. Rollout
-``j`` of every alternative uses the same truth (common random numbers).
+of ``batch``: every alternative until it has ``min_count``, then only those the stopping rule
+of :mod:`executive.risk.fusion` still finds in contention
+(:mod:`executive.decision.rollout_allocation`), each up to ``count``, until none is left or
+the next round would overrun ``budget_s``. Rollout ``j`` of every alternative uses the same
+truth (common random numbers). A run ends at its outcome: the first failure a detector or a
+behaviour reports ends it within the physics step or tick, a success on the tick its subtree
+succeeds.
 
 Jobs run through a ``run_map`` callable (jobs in, records out, in order): a
 :class:`RolloutPool` of warm worker processes, the campaign's backends, or ``map`` itself.
@@ -33,9 +37,10 @@ import numpy as np
 
 from executive.decision.priority import normal_policy_children
 from executive.decision.risk_models import dry_run_update
+from executive.decision.rollout_allocation import CLEAR, COUNT, GOING, allocate
 from executive.errors import ExecutiveError
 from executive.risk.combine import CombinedRisk, combine
-from executive.risk.fusion import choice_confidence, fuse, posteriors
+from executive.risk.fusion import Contention, contention, fuse, posteriors
 from executive.schema.types import RiskConfig, Scenario, SceneVariation
 
 if TYPE_CHECKING:
@@ -148,7 +153,8 @@ def _truth(job: RolloutJob) -> World:
 
 
 def run_job(job: RolloutJob) -> dict[str, Any]:
-    """Execute ``job`` in physics; its record: alternative, seed, outcome, failure, wall time.
+    """Execute ``job`` in physics; its record: alternative, seed, outcome, failure, physics steps,
+    wall time.
 
     ``outcome`` is ``success``, a failure detector's mode, ``timeout``, or ``error`` (the code
     raised: a defect, counted, never hidden). What follows a walk inside the plan is re-planned
@@ -162,6 +168,7 @@ def run_job(job: RolloutJob) -> dict[str, Any]:
     try:
         result = execute_plan(job.plan, _truth(job), job.plan.task, seed=job.seed)
         record.update(outcome_fields(result))
+        record["physics_steps"] = result.physics_steps
     except Exception as exc:
         record.update(error_fields(exc))
     record["wall_s"] = time.perf_counter() - t0
@@ -182,6 +189,7 @@ class PhysicsResult:
     analytic: CombinedRisk
     counts: Counter[str] = field(default_factory=Counter)  # outcome -> rollouts
     rollouts: int = 0
+    stopped: str = ""  # why it got no more rollouts: clear, count or budget (rollout_allocation)
     fused: CombinedRisk | None = None  # None: no rollouts ran (the prior stands)
     measured: CombinedRisk | None = None
 
@@ -207,6 +215,8 @@ class PhysicsResult:
     def as_dict(self, confidence: float) -> dict[str, Any]:
         """JSON-safe: the dry run, and per mode the analytic probability, counts, fused value, interval."""
         out: dict[str, Any] = {"dry_run": _dry_json(self.dry_run), "rollouts": self.rollouts}
+        if self.stopped:
+            out["stopped"] = self.stopped
         out["outcomes"] = dict(self.counts)
         if self.fused is not None:
             modes = {}
@@ -250,21 +260,32 @@ class PhysicsVerdict:
     """The physics check of one decision: per alternative its result, and how the rollouts ended.
 
     ``stopped``: ``off`` (no rollouts configured), ``none left`` (every dry run failed),
-    ``clear`` (the stopping rule), ``count`` or ``budget``.
+    ``clear`` (every alternative stopped as the allocation's rule said), ``count`` (one was
+    still unsure at the cap) or ``budget``. Each alternative's own count and reason are in
+    :attr:`alternatives` (``rollouts``, ``stopped``).
     """
 
     alternatives: dict[str, PhysicsResult]
-    rollouts: int = 0  # per surviving alternative
+    rollouts: int = 0  # the most any alternative had
     stopped: str = "off"
     confidence: float | None = None  # the stopping rule's last P(choice within the indifference)
     opportunity_cost: float | None = None  # and the expected extra loss of that choice
     dry_run_s: float = 0.0
     rollout_s: float = 0.0
+    physics_steps: int = 0  # simulated by the dry runs and the rollouts
+
+    @property
+    def rollouts_total(self) -> int:
+        """Rollouts of all alternatives together."""
+        return sum(r.rollouts for r in self.alternatives.values())
 
     def as_dict(self) -> dict[str, Any]:
         return {
             "rollouts": self.rollouts,
+            "rollouts_total": self.rollouts_total,
+            "allocation": {n: r.rollouts for n, r in self.alternatives.items() if r.dry_run_ok},
             "stopped": self.stopped,
+            "physics_steps": self.physics_steps,
             "choice_confidence": self.confidence,
             "opportunity_cost": self.opportunity_cost,
             "dry_run_s": self.dry_run_s,
@@ -303,6 +324,7 @@ def check_alternatives(
         for name, record in zip(plans, run_map(dry), strict=True)
     }
     verdict = PhysicsVerdict(results, dry_run_s=clock() - t0)
+    verdict.physics_steps = sum(int(r.dry_run.get("physics_steps", 0)) for r in results.values())
     alive = [name for name, r in results.items() if r.dry_run_ok]
     if scenario.risk.rollouts.count == 0:
         return verdict
@@ -339,45 +361,60 @@ def _roll_out(
     q_start: np.ndarray | None,
     clock: Callable[[], float],
 ) -> None:
-    """Rounds of rollouts until the stopping rule, the count or the time budget ends them."""
+    """Rounds of rollouts, each for the alternatives the allocation keeps going
+    (:func:`executive.decision.rollout_allocation.allocate`), until none is left or the next
+    round would overrun the time budget (once every alternative has its minimum; a round's
+    time is foreseen from the last one's, per job)."""
     cfg, risk = scenario.risk.rollouts, scenario.risk
-    results, t0, n, round_s = verdict.alternatives, clock(), 0, 0.0
-    verdict.stopped = "count"
-    while n < cfg.count:
-        if round_s > 0 and clock() - t0 + round_s > cfg.budget_s:
-            verdict.stopped = "budget"
+    results, t0 = verdict.alternatives, clock()
+    by_name = {plan.name: plan for plan in plans}
+    state, job_s = dict.fromkeys(by_name, GOING), 0.0  # wall time of the last round per job
+    while going := [name for name, why in state.items() if why == GOING]:
+        jobs = [
+            RolloutJob(scenario, by_name[name], rollout_seed(scenario.trials.seed, j), q_start)
+            for k in range(cfg.batch)
+            for name in going
+            if (j := results[name].rollouts + k) < cfg.count
+        ]
+        short = any(results[name].rollouts < cfg.min_count for name in going)
+        if not short and clock() - t0 + job_s * len(jobs) > cfg.budget_s:
+            state.update(dict.fromkeys(going, "budget"))
             break
-        size = min(cfg.batch, cfg.count - n)
-        seeds = [rollout_seed(scenario.trials.seed, j) for j in range(n, n + size)]
-        jobs = [RolloutJob(scenario, plan, seed, q_start) for seed in seeds for plan in plans]
         started = clock()
         for job, record in zip(jobs, run_map(jobs), strict=True):
-            results[job.plan.name].counts[record["outcome"]] += 1
-        round_s, n = clock() - started, n + size
-        for plan in plans:
-            results[plan.name].rollouts = n
-        if n >= cfg.min_count:
-            verdict.confidence, verdict.opportunity_cost = _choice(results, plans, risk, n)
-            if verdict.confidence >= cfg.confidence:
-                verdict.stopped = "clear"
-                break
-    verdict.rollouts, verdict.rollout_s = n, clock() - t0
+            result = results[job.plan.name]
+            result.counts[record["outcome"]] += 1
+            result.rollouts += 1
+            verdict.physics_steps += int(record.get("physics_steps", 0))
+        job_s = (clock() - started) / len(jobs)
+        view = _contention(results, plans, risk)
+        verdict.confidence, verdict.opportunity_cost = view.choice.confidence, view.choice.opportunity_cost
+        state = allocate(view, {name: results[name].rollouts for name in by_name}, cfg)
+    for name, why in state.items():
+        results[name].stopped = why
+    reasons = set(state.values())
+    verdict.stopped = "budget" if "budget" in reasons else COUNT if COUNT in reasons else CLEAR
+    verdict.rollouts = max(results[name].rollouts for name in by_name)
+    verdict.rollout_s = clock() - t0
 
 
-def _choice(
-    results: Mapping[str, PhysicsResult], plans: Sequence[AlternativePlan], risk: RiskConfig, n: int
-) -> tuple[float, float]:
-    """The stopping rule's P(the current best is within the indifference of the best), and the
-    expected opportunity cost of choosing it."""
-    if len(plans) == 1:
-        return 1.0, 0.0
+def _contention(
+    results: Mapping[str, PhysicsResult], plans: Sequence[AlternativePlan], risk: RiskConfig
+) -> Contention:
+    """The stopping rule's view of the choice now (:func:`contention`): P(the current best
+    is within the indifference of the best), the expected opportunity cost of choosing it, each
+    alternative's chance to beat it, and the chance that it needs approval. Its draws are seeded
+    with the most rollouts any alternative has had."""
     cfg = risk.rollouts
     candidates = {
-        p.name: posteriors(results[p.name].prior, results[p.name].counts, n, cfg.prior_weight) for p in plans
+        p.name: posteriors(
+            results[p.name].prior, results[p.name].counts, results[p.name].rollouts, cfg.prior_weight
+        )
+        for p in plans
     }
     offsets = {p.name: results[p.name].analytic.time_loss for p in plans}
-    choice = choice_confidence(candidates, risk.ordering, cfg.indifference, seed=n, offsets=offsets)
-    return choice.confidence, choice.opportunity_cost
+    seed = max(results[p.name].rollouts for p in plans)
+    return contention(candidates, risk.ordering, cfg.indifference, risk.threshold, seed=seed, offsets=offsets)
 
 
 def exit_with_parent(parent: int, period_s: float = 0.2) -> threading.Thread:

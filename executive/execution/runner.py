@@ -57,6 +57,7 @@ class RunResult:
     sim_time_s: float = 0.0
     wall_s: float = 0.0  # wall time of the execution loop
     physics_wall_s: float = 0.0  # of which stepping physics (+ detectors + servo targets)
+    physics_steps: int = 0  # mj_step calls
     ticks: int = 0
     max_tick_s: float = 0.0
     statuses: list[str] = field(default_factory=list)  # root status after each tick, run-length encoded
@@ -128,6 +129,7 @@ def execute_plan(
     result.wall_s = time.perf_counter() - start
     result.end_errors = end_errors(root)
     result.physics_wall_s = robot.stats.physics_wall_s
+    result.physics_steps = robot.stats.physics_steps
     result.sim_time_s = float(truth.data.time)
     result.restances = [n.record for n in root.iterate() if isinstance(n, Restance) and n.record is not None]
     if root.status == Status.SUCCESS:

@@ -26,7 +26,16 @@ from executive.risk.orderings import ordering as ordering_named
 from executive.schema.failure_modes import failure_mode, mode_names
 from executive.schema.types import RiskConfig
 
-__all__ = ["Choice", "ModePosterior", "choice_confidence", "fuse", "observed_as", "posteriors"]
+__all__ = [
+    "Choice",
+    "Contention",
+    "ModePosterior",
+    "choice_confidence",
+    "contention",
+    "fuse",
+    "observed_as",
+    "posteriors",
+]
 
 
 def observed_as(mode: str) -> tuple[str, ...]:
@@ -132,6 +141,14 @@ class Choice(NamedTuple):
     opportunity_cost: float  # E[value(best) - min over alternatives]: what choosing it costs on average
 
 
+class Contention(NamedTuple):
+    """The stopping rule's view of a decision and what keeps it open, per alternative."""
+
+    choice: Choice
+    rivals: Mapping[str, float]  # P(its value is below best's by more than the indifference); best: 0
+    above_threshold: float  # P(best's value is above the threshold: its approval is asked)
+
+
 def choice_confidence(
     candidates: Mapping[str, Sequence[ModePosterior]],
     ordering: str,
@@ -152,6 +169,44 @@ def choice_confidence(
     Raises:
         ValueError: no candidates.
     """
+    names, samples = _joint_draws(candidates, ordering, draws, seed, offsets)
+    return _choice_of(names, samples, indifference)
+
+
+def contention(
+    candidates: Mapping[str, Sequence[ModePosterior]],
+    ordering: str,
+    indifference: float,
+    threshold: float,
+    *,
+    draws: int = 4000,
+    seed: int = 0,
+    offsets: Mapping[str, float] | None = None,
+) -> Contention:
+    """:func:`choice_confidence` (the same draws, the same numbers) with, per alternative, its
+    chance of beating the best by more than ``indifference``, and the chance that the best's
+    value is above ``threshold``: what a sequential allocation of rollouts spends them on
+    (:mod:`executive.decision.rollout_allocation`). With ``ordering == "weighted_sum"`` the
+    value sampled is the probability of any failure, as for the stopping rule.
+
+    Raises:
+        ValueError: no candidates.
+    """
+    names, samples = _joint_draws(candidates, ordering, draws, seed, offsets)
+    choice = _choice_of(names, samples, indifference)
+    best = samples[names.index(choice.best)]
+    rivals = {name: float((samples[i] < best - indifference).mean()) for i, name in enumerate(names)}
+    return Contention(choice, rivals, float((best > threshold).mean()))
+
+
+def _joint_draws(
+    candidates: Mapping[str, Sequence[ModePosterior]],
+    ordering: str,
+    draws: int,
+    seed: int,
+    offsets: Mapping[str, float] | None,
+) -> tuple[list[str], np.ndarray]:
+    """The alternatives' names and ``draws`` seeded samples of each one's value (rows)."""
     if not candidates:
         raise ValueError("choice_confidence needs at least one alternative")
     rng = np.random.default_rng(seed)
@@ -160,6 +215,10 @@ def choice_confidence(
     samples = np.stack(
         [_values(candidates[name], ordering, draws, rng, off.get(name, 0.0)) for name in names]
     )
+    return names, samples
+
+
+def _choice_of(names: Sequence[str], samples: np.ndarray, indifference: float) -> Choice:
     best = int(np.argmin(samples.mean(axis=1)))
     shortfall = samples[best] - samples.min(axis=0)
     return Choice(names[best], float((shortfall <= indifference).mean()), float(shortfall.mean()))

@@ -432,12 +432,17 @@ _GUARD = Block(
 )
 _ROLLOUTS = Block(
     "Monte Carlo risk in physics before ranking: each feasible alternative is executed on truths "
-    "sampled from the uncertainty, in rounds of batch, until the stopping rule calls the choice "
-    "clear, count rollouts are done or budget_s is spent; fused with the analytic prediction",
+    "sampled from the uncertainty, in rounds of batch: every one up to min_count, then only those "
+    "the stopping rule still finds in contention, each up to count (the cap), or until budget_s is "
+    "spent; fused with the analytic prediction",
     {
-        "count": Integer("most rollouts per alternative; 0: off (the dry runs still run)", 0, R.ROLLOUTS_MAX),
+        "count": Integer(
+            "most rollouts per alternative (the cap); 0: off (the dry runs still run)", 0, R.ROLLOUTS_MAX
+        ),
         "min_count": Integer(
-            "rollouts per alternative before the stopping rule may stop; <= count", 1, R.ROLLOUTS_MAX
+            "rollouts every alternative gets before the stopping rule may stop it; <= count",
+            1,
+            R.ROLLOUTS_MAX,
         ),
         "batch": Integer("rollouts per alternative per round", 1, R.ROLLOUTS_MAX),
         "budget_s": _open("wall time for all rollouts of one decision", R.BUDGET_MAX_S, "s"),

@@ -251,15 +251,19 @@ class RolloutConfig:
     """Monte Carlo risk in physics before ranking (``risk.rollouts``; executive/rollouts.py).
 
     Each feasible alternative is executed on truths sampled from the uncertainty, in rounds
-    of ``batch`` per alternative, until the sequential stopping rule says the choice is clear,
-    ``count`` rollouts per alternative are done, or ``budget_s`` of wall time is spent. The
-    counts are fused with the analytic prediction (a Beta prior of weight ``prior_weight``).
-    The dry run (each alternative once on the estimate) always runs; it is not configured here.
+    of ``batch``; after ``min_count`` each, a round is only for the alternatives whose
+    posterior still leaves the choice (or the best's approval) unsure
+    (:mod:`executive.decision.rollout_allocation`), until none is, ``count`` rollouts of an
+    alternative are done (the cap), or ``budget_s`` of wall time is spent. The counts are
+    fused with the analytic prediction (a Beta prior of weight ``prior_weight``). The dry run
+    (each alternative once on the estimate) always runs; it is not configured here.
     """
 
-    count: int = 4  # [0, 1000] most rollouts per alternative; 0: off (the dry runs still run)
-    min_count: int = 4  # [1, 1000] rollouts per alternative before the stopping rule may stop; <= count
-    batch: int = 4  # [1, 1000] rollouts per alternative per round
+    count: int = 4  # [0, 1000] most rollouts per alternative (the cap); 0: off (the dry runs still run)
+    min_count: int = (
+        2  # [1, 1000] rollouts every alternative gets before the allocation may stop it; <= count
+    )
+    batch: int = 2  # [1, 1000] rollouts per alternative per round
     budget_s: float = 30.0  # (0, 3600] s of wall time for all rollouts of one decision
     confidence: float = (
         0.95  # (0.5, 0.999] posterior probability at which the stopping rule calls the choice clear

@@ -321,7 +321,9 @@ def _predictions_text(scenario: Scenario, decide: bool) -> str:
     n = scenario.risk.rollouts.count
     if decide:
         fused = (
-            f"fused with {n} rollouts per alternative" if n else "analytic, after the dry runs (no rollouts)"
+            f"fused with up to {n} rollouts per alternative"
+            if n
+            else "analytic, after the dry runs (no rollouts)"
         )
         return (
             "each trial's decision, on its own estimate as the executive makes it: planned, assessed, "
