@@ -21,7 +21,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from executive.risk.gaussian import gauss_hermite_normal, normal_cdf
 from executive.risk.hand_span import hand_collision_geoms
-from executive.risk.model_geometry import geom_corners, geom_points, half_extent
+from executive.risk.model_geometry import geom_corners, half_extent
 from executive.world.model import World
 from executive.world.scratch import scratch_data
 
@@ -70,17 +70,36 @@ class ApproachEnvelope:
         return hi - self.half_width * sec, lo + self.half_width * sec
 
 
-def _below(model: mujoco.MjModel, data: mujoco.MjData, geom: int, top: float) -> FloatArray:
+def _below(
+    model: mujoco.MjModel, data: mujoco.MjData, geom: int, top: float, local: FloatArray | None
+) -> FloatArray:
     """The points of a hand geom below ``top`` that can meet the object's side on the way down.
 
-    A mesh (a dexterous hand's finger) gives its vertices below the top; a primitive gives all
-    its bounding box's corners when its lowest corner is below the top (none otherwise).
+    A mesh (a dexterous hand's finger) gives its vertices below the top (``local``: its vertices
+    in its frame, :func:`_mesh_vertices`); a primitive gives all its bounding box's corners when
+    its lowest corner is below the top (none otherwise).
     """
-    if model.geom_type[geom] == mujoco.mjtGeom.mjGEOM_MESH:
-        verts = geom_points(model, data, geom)
+    if local is not None:  # as geom_points, with the vertices read once per envelope
+        verts = np.asarray(data.geom_xpos[geom] + local @ data.geom_xmat[geom].reshape(3, 3).T, dtype=float)
         return verts[verts[:, 2] < top]
     pts = geom_corners(model, data, geom)
     return pts if float(pts[:, 2].min()) < top else np.zeros((0, 3))
+
+
+def _mesh_vertices(model: mujoco.MjModel, geom: int) -> FloatArray | None:
+    """A mesh geom's vertices in its frame (float64; None for a primitive)."""
+    if model.geom_type[geom] != mujoco.mjtGeom.mjGEOM_MESH:
+        return None
+    mesh = int(model.geom_dataid[geom])
+    start, count = int(model.mesh_vertadr[mesh]), int(model.mesh_vertnum[mesh])
+    return np.asarray(model.mesh_vert[start : start + count], dtype=float)
+
+
+def _bound(model: mujoco.MjModel, geom: int) -> float:
+    """A radius about the geom's origin that holds its local bounding box (so its vertices and
+    corners): the box's centre's distance plus its half diagonal."""
+    aabb = model.geom_aabb[geom]
+    return float(np.linalg.norm(aabb[:3]) + np.linalg.norm(aabb[3:])) + 1e-9
 
 
 def _extreme_points(points: FloatArray) -> FloatArray:
@@ -127,22 +146,25 @@ def approach_envelope(
     x_world = np.array([y_world[1], -y_world[0], 0.0])
     centre = world.data.geom_xpos[geom].copy()
     top = float(centre[2] + half_extent(model, geom, rot.T @ np.array([0.0, 0.0, 1.0])))
-    geoms = hand_collision_geoms(world, side)
+    width = half_extent(model, geom, c_axis)
+    # Beyond the object's circumradius along its lateral axis a point passes its end at any yaw
+    # (e.g. a hand starting at the robot's hip, below the table top, far to one side).
+    reach = float(np.hypot(width, half_extent(model, geom, np.cross(c_axis, [0.0, 0.0, 1.0]))))
+    geoms = [(g, _mesh_vertices(model, g), _bound(model, g)) for g in hand_collision_geoms(world, side)]
     corners: list[FloatArray] = []
     with scratch_data(model) as data:
         for q in np.asarray(qpos_path, dtype=float).reshape(-1, model.nq):
             data.qpos[:] = q
             mujoco.mj_kinematics(model, data)
-            for g in geoms:
-                pts = _below(model, data, g, top)
+            for g, local, bound in geoms:
+                at = data.geom_xpos[g]  # a geom wholly above the top, or beyond the reach: no point
+                if at[2] - bound >= top or abs(float((at - centre) @ x_world)) - bound > reach:
+                    continue
+                pts = _below(model, data, g, top, local)
                 if len(pts):
                     rel = pts - centre
                     corners.append(np.column_stack([rel @ x_world, rel @ y_world]))
     flat = np.concatenate(corners) if corners else np.zeros((0, 2))
-    width = half_extent(model, geom, c_axis)
-    # Beyond the object's circumradius along its lateral axis a point passes its end at any yaw
-    # (e.g. a hand starting at the robot's hip, below the table top, far to one side).
-    reach = float(np.hypot(width, half_extent(model, geom, np.cross(c_axis, [0.0, 0.0, 1.0]))))
     flat = flat[np.abs(flat[:, 0]) <= reach]
     side_a, side_b = flat[flat[:, 1] > 0.0], flat[flat[:, 1] <= 0.0]
     return ApproachEnvelope(_extreme_points(side_a), _extreme_points(side_b), float(width))
