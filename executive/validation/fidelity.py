@@ -160,15 +160,7 @@ def run_fidelity(
     from executive.validation.variants import base_document
     from executive.validation.variation_ranges import family_ranges_path, load_ranges
 
-    for name, value, least in (("--variants", variants, 1), ("--trials", trials, 1), ("--jobs", jobs, 1)):
-        if value < least:
-            raise ExecutiveError(f"{name} must be at least {least}; got {value}")
-    if rollouts is None:
-        rollouts = scenario.risk.rollouts.count if decide else 0
-    if rollouts < 0:
-        raise ExecutiveError(f"--rollouts must be 0 (off) or more; got {rollouts}")
-    if not 0 <= task_index < len(scenario.mission):
-        raise ExecutiveError(f"--task {task_index}: {scenario.name} has tasks 0-{len(scenario.mission) - 1}")
+    rollouts = _check_arguments(scenario, variants, trials, jobs, rollouts, decide, task_index)
     ranges_path = Path(ranges) if ranges is not None else family_ranges_path(scenario.source)
     drawn_from = load_ranges(ranges_path) if ranges_path is not None else None
     if out is None and resume:
@@ -199,6 +191,28 @@ def run_fidelity(
         f"{rollouts or 'off'}{', each trial decides' if decide else ''}, {jobs} job(s); suite folder {folder}"
     )
     return _run_variants(scenario, document, folder, config, jobs, log, drawn_from)
+
+
+def _check_arguments(
+    scenario: Scenario,
+    variants: int,
+    trials: int,
+    jobs: int,
+    rollouts: int | None,
+    decide: bool,
+    task_index: int,
+) -> int:
+    """The suite's rollouts count; ExecutiveError naming a bad count or task."""
+    for name, value, least in (("--variants", variants, 1), ("--trials", trials, 1), ("--jobs", jobs, 1)):
+        if value < least:
+            raise ExecutiveError(f"{name} must be at least {least}; got {value}")
+    if rollouts is None:
+        rollouts = scenario.risk.rollouts.count if decide else 0
+    if rollouts < 0:
+        raise ExecutiveError(f"--rollouts must be 0 (off) or more; got {rollouts}")
+    if not 0 <= task_index < len(scenario.mission):
+        raise ExecutiveError(f"--task {task_index}: {scenario.name} has tasks 0-{len(scenario.mission) - 1}")
+    return rollouts
 
 
 def _logger(stream: IO[str] | None) -> Callable[[str], None]:
