@@ -27,6 +27,7 @@ from executive.tasks.base import Alternative, Task, TaskKind, Verdict
 from executive.tasks.hands import HandFrames
 from executive.tasks.registry import register
 from executive.tasks.steps import plan_alternative
+from executive.tasks.variation import VariedPoint
 from executive.world.model import World
 
 __all__ = [
@@ -44,6 +45,7 @@ __all__ = [
     "Task",
     "TaskKind",
     "Text",
+    "VariedPoint",
     "Vector",
     "Verdict",
     "World",

@@ -91,6 +91,15 @@ def _add_fidelity(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> N
         help="risk.rollouts.count of every variant (default: the scenario's with --decide, else 0: off)",
     )
     p.add_argument("--decide", action="store_true", help=DECIDE_HELP)
+    p.add_argument(
+        "--task", type=TASK_INDEX, default=0, help="index of the task each campaign runs (default 0)"
+    )
+    p.add_argument(
+        "--ranges",
+        metavar="FILE",
+        help="variation ranges (YAML; default: variation/<scenario stem>.yaml beside the scenario "
+        "file if there, else the built-in ranges)",
+    )
     p.add_argument("--resume", action="store_true", help="complete the suite in --out DIR")
     p.set_defaults(func=run_fidelity_command)
 
@@ -157,6 +166,8 @@ def run_fidelity_command(args: argparse.Namespace) -> int:
         resume=args.resume,
         stream=sys.stdout,
         decide=args.decide,
+        task_index=args.task,
+        ranges=args.ranges,
     )
     print(table_text(result.summary))
     print(f"suite folder {result.folder} (summary.json, table.md, reliability.png, variant-KK.yaml and -KK/)")
@@ -164,7 +175,8 @@ def run_fidelity_command(args: argparse.Namespace) -> int:
         print(
             f"executive fidelity: interrupted. Complete it with: executive fidelity {args.scenario} "
             f"--variants {args.variants} --trials {args.trials} --seed {result.summary['seed']} "
-            f"--rollouts {result.summary['rollouts']}{' --decide' if args.decide else ''} --resume "
+            f"--rollouts {result.summary['rollouts']}{' --decide' if args.decide else ''} --task {args.task} "
+            f"{f'--ranges {args.ranges} ' if args.ranges else ''}--resume "
             f"--out {result.folder}",
             file=sys.stderr,
         )

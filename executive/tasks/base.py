@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING, Any, ClassVar
 from executive.schema.declarations import Alternatives, Block, nullable
 from executive.schema.types import Task
 from executive.tasks.subtree import build_subtree
+from executive.tasks.variation import VariedPoint
 
 if TYPE_CHECKING:
     import py_trees
@@ -34,7 +35,7 @@ if TYPE_CHECKING:
     from executive.schema.yaml_nodes import Node
     from executive.world.model import World
 
-__all__ = ["Alternative", "Task", "TaskKind", "Verdict", "alternatives_key"]
+__all__ = ["Alternative", "Task", "TaskKind", "VariedPoint", "Verdict", "alternatives_key"]
 
 
 def alternatives_key(names: tuple[str, ...]) -> Alternatives:
@@ -164,6 +165,13 @@ class TaskKind(abc.ABC):
         ``world`` is the estimate (the scene as planned); ``detector`` watches the robot's world.
         """
         return None
+
+    def varied_points(self, task: Task) -> tuple[VariedPoint, ...]:
+        """The points of ``task``'s block a scene variant moves (:mod:`executive.tasks.variation`).
+
+        Default: none (the task names no point of the scene; its objects vary with the scene).
+        """
+        return ()
 
     def moved_objects(self, task: Task) -> tuple[str, ...]:
         """The objects this task may move (their poses are observed again afterwards)."""

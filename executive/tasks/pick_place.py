@@ -27,6 +27,7 @@ from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternati
 from executive.tasks.hands import ONE_HAND, UP, HandFrames
 from executive.tasks.phases import carry_lane_front, grasp_height, lane_carry, pick, place
 from executive.tasks.placement import placed_verdict, target_placement
+from executive.tasks.variation import VariedPoint
 from executive.world.heading import yaw_of
 from executive.world.model import World
 
@@ -235,6 +236,11 @@ class PlaceKind(TaskKind):
     def verify(self, task: Task, world: World, detector: object) -> Verdict | None:
         assert isinstance(task, PlaceTask)
         return placed_verdict(world, detector, task.object, task.to, task.to_yaw_rad)
+
+    def varied_points(self, task: Task) -> tuple[VariedPoint, ...]:
+        """The target ``to``, where the task puts its object down."""
+        assert isinstance(task, PlaceTask)
+        return (VariedPoint("to", task.to, places=task.object, yaw_rad=task.to_yaw_rad),)
 
 
 def site_offset(world: World, obj: str, cfg: CompositionConfig) -> FloatArray:

@@ -34,6 +34,7 @@ from executive.schema.yaml_nodes import Node
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
 from executive.tasks.hands import HandFrames
 from executive.tasks.subtree import build_subtree
+from executive.tasks.variation import VariedPoint
 from executive.world.model import World
 
 if TYPE_CHECKING:
@@ -220,6 +221,11 @@ class PressKind(TaskKind):
 
     def moved_objects(self, task: Task) -> tuple[str, ...]:
         return ()
+
+    def varied_points(self, task: Task) -> tuple[VariedPoint, ...]:
+        """The ``point`` on the target's surface: it moves as the target does."""
+        assert isinstance(task, PressTask)
+        return (VariedPoint("point", task.point, follows=task.target),)
 
 
 def _press_record() -> dict[str, Any] | None:

@@ -36,6 +36,7 @@ from executive.schema.yaml_nodes import Node
 from executive.tasks.base import Alternative, Task, TaskKind, Verdict, alternatives_key
 from executive.tasks.grasp_geometry import hand_geometry
 from executive.tasks.hands import UP, HandFrames
+from executive.tasks.variation import VariedPoint
 from executive.world.model import World
 
 __all__ = [
@@ -120,6 +121,11 @@ class PushKind(TaskKind):
                 alternative, None, 0.0, 0.0, 0, reason=f"push has no alternative '{alternative}'"
             )
         return push_steps(world, task, alternative, config)
+
+    def varied_points(self, task: Task) -> tuple[VariedPoint, ...]:
+        """The target ``to`` on the table top, where the push leaves its object (its yaw as it was)."""
+        assert isinstance(task, PushTask)
+        return (VariedPoint("to", task.to, places=task.object),)
 
     def verify(self, task: Task, world: World, detector: object) -> Verdict | None:
         """The object rests within the scene's place tolerance of the target (position only:

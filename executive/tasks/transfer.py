@@ -59,6 +59,7 @@ from executive.tasks.hands import ONE_HAND, HandFrames
 from executive.tasks.phases import one_hand_leg
 from executive.tasks.pick_place import PlaceTask, place_steps, site_offset
 from executive.tasks.placement import placed_verdict, target_placement
+from executive.tasks.variation import VariedPoint
 from executive.world.heading import yaw_of
 from executive.world.model import World
 
@@ -211,6 +212,11 @@ class TransferKind(TaskKind):
     def verify(self, task: Task, world: World, detector: object) -> Verdict | None:
         assert isinstance(task, TransferTask)
         return placed_verdict(world, detector, task.object, task.to, task.to_yaw_rad)
+
+    def varied_points(self, task: Task) -> tuple[VariedPoint, ...]:
+        """The target ``to``, where the task leaves its object."""
+        assert isinstance(task, TransferTask)
+        return (VariedPoint("to", task.to, places=task.object, yaw_rad=task.to_yaw_rad),)
 
 
 HANDOVERS_SIDES = {"left_to_right": ("left", "right"), "right_to_left": ("right", "left")}

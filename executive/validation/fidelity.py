@@ -2,9 +2,11 @@
 
 ``executive fidelity SCENARIO --variants K --trials N`` draws K seeded variants of the
 scenario's scene (:mod:`executive.validation.variants`: object yaw, mass, size and friction,
-object/obstacle/target positions, table height), writes each as a YAML file in the
-suite folder, runs a validation campaign on each (:func:`executive.validation.campaign.run_campaign`,
-N trials per alternative on sampled truths) and reports:
+object/obstacle/target positions, table height, within the family's ranges,
+:mod:`executive.validation.variation_ranges`), writes each as a YAML file in the
+suite folder, runs a validation campaign of one task on each
+(:func:`executive.validation.campaign.run_campaign`, N trials per alternative on sampled
+truths; ``--task N``, default 0) and reports:
 
 * per variant and alternative: the mean predicted value (the number the selector ranks
   by) and P(any failure), against the observed failure rate with its 95% Clopper-Pearson
@@ -46,6 +48,7 @@ from executive.validation.campaign_scoring import (
     pooled_statistics,
     reliability_curves,
 )
+from executive.validation.variation_ranges import VariationRanges
 
 if TYPE_CHECKING:
     from executive.validation.variants import Variant
@@ -93,8 +96,16 @@ def _prepare(folder: Path, config: dict[str, Any], resume: bool) -> None:
     """Write (or, with ``resume``, check) the suite's ``suite.json``."""
     path = folder / "suite.json"
     if resume:
-        keys = ("scenario", "scenario_sha256", "seed", "rollouts", *(("decide",) if config["decide"] else ()))
-        how = "the same scenario, --seed, --rollouts and --decide"
+        keys = (
+            "scenario",
+            "scenario_sha256",
+            "seed",
+            "rollouts",
+            "task",
+            "ranges",
+            *(("decide",) if config["decide"] else ()),
+        )
+        how = "the same scenario, --seed, --rollouts, --task, ranges and --decide"
         read_resume_settings(folder, "suite.json", config, keys, "a fidelity suite", how)
     elif path.is_file():
         raise ExecutiveError(
@@ -116,6 +127,8 @@ def run_fidelity(
     resume: bool = False,
     stream: IO[str] | None = None,
     decide: bool = False,
+    task_index: int = 0,
+    ranges: Path | str | None = None,
 ) -> FidelityResult:
     """Run (or, with ``resume``, complete) a fidelity suite of ``scenario``.
 
@@ -132,24 +145,24 @@ def run_fidelity(
         stream: where progress goes (default stdout).
         decide: every campaign decides per trial as the executive does
             (:func:`executive.validation.campaign.run_campaign`'s ``decide``).
+        task_index: the mission's task each campaign runs (alone, from the variant's scene).
+        ranges: a variation ranges file (default: the family's beside the scenario,
+            :func:`executive.validation.variation_ranges.family_ranges_path`, else the defaults).
 
     Returns:
         The suite's folder and summary (also in ``summary.json``).
 
     Raises:
         ExecutiveError: bad arguments, an unwritable or already used folder, a scene
-            with no valid variant.
+            with no valid variant, a malformed ranges file (naming its key).
     """
     from executive.decision.audit import run_folder
     from executive.validation.variants import base_document
+    from executive.validation.variation_ranges import family_ranges_path, load_ranges
 
-    for name, value, least in (("--variants", variants, 1), ("--trials", trials, 1), ("--jobs", jobs, 1)):
-        if value < least:
-            raise ExecutiveError(f"{name} must be at least {least}; got {value}")
-    if rollouts is None:
-        rollouts = scenario.risk.rollouts.count if decide else 0
-    if rollouts < 0:
-        raise ExecutiveError(f"--rollouts must be 0 (off) or more; got {rollouts}")
+    rollouts = _check_arguments(scenario, variants, trials, jobs, rollouts, decide, task_index)
+    ranges_path = Path(ranges) if ranges is not None else family_ranges_path(scenario.source)
+    drawn_from = load_ranges(ranges_path) if ranges_path is not None else None
     if out is None and resume:
         raise ExecutiveError("--resume needs --out DIR: the folder of the suite to complete")
     folder = Path(out) if out is not None else run_folder(f"{scenario.name}-fidelity")
@@ -163,17 +176,43 @@ def run_fidelity(
         "decide": decide,
         "variants": variants,
         "trials": trials,
+        "task": task_index,
+        "ranges_file": str(ranges_path) if ranges_path is not None else None,
+        "ranges": (drawn_from or VariationRanges()).as_dict(),
     }
     document = base_document(scenario)
     _prepare(folder, config, resume)
     log = _logger(stream)
-    task = scenario.mission[0]
+    task = scenario.mission[task_index]
     log(
-        f"fidelity {scenario.name}: {variants} variant(s) x {trials} trial(s) x {len(task.alternatives)} "
+        f"fidelity {scenario.name}, task {task_index} ({task.label()}), ranges "
+        f"{ranges_path or 'default'}: {variants} variant(s) x {trials} trial(s) x {len(task.alternatives)} "
         f"alternatives ({', '.join(task.alternatives)}), seed {base_seed}, rollouts "
         f"{rollouts or 'off'}{', each trial decides' if decide else ''}, {jobs} job(s); suite folder {folder}"
     )
-    return _run_variants(scenario, document, folder, config, jobs, log)
+    return _run_variants(scenario, document, folder, config, jobs, log, drawn_from)
+
+
+def _check_arguments(
+    scenario: Scenario,
+    variants: int,
+    trials: int,
+    jobs: int,
+    rollouts: int | None,
+    decide: bool,
+    task_index: int,
+) -> int:
+    """The suite's rollouts count; ExecutiveError naming a bad count or task."""
+    for name, value, least in (("--variants", variants, 1), ("--trials", trials, 1), ("--jobs", jobs, 1)):
+        if value < least:
+            raise ExecutiveError(f"{name} must be at least {least}; got {value}")
+    if rollouts is None:
+        rollouts = scenario.risk.rollouts.count if decide else 0
+    if rollouts < 0:
+        raise ExecutiveError(f"--rollouts must be 0 (off) or more; got {rollouts}")
+    if not 0 <= task_index < len(scenario.mission):
+        raise ExecutiveError(f"--task {task_index}: {scenario.name} has tasks 0-{len(scenario.mission) - 1}")
+    return rollouts
 
 
 def _logger(stream: IO[str] | None) -> Callable[[str], None]:
@@ -195,6 +234,7 @@ def _run_variants(
     config: dict[str, Any],
     jobs: int,
     log: Callable[[str], None],
+    ranges: VariationRanges | None,
 ) -> FidelityResult:
     """Draw, write and run each variant's campaign; then the suite's statistics."""
     from executive.decision.physics_check import with_rollouts
@@ -204,12 +244,13 @@ def _run_variants(
 
     t0 = time.perf_counter()
     k_total, n = config["variants"], config["trials"]
-    names = list(scenario.mission[0].alternatives)
+    task_index = config["task"]
+    names = list(scenario.mission[task_index].alternatives)
     done: list[dict[str, Any]] = []
     records: list[dict[str, Any]] = []
     new_trials, campaign_s, interrupted = 0, 0.0, False
     for k in range(k_total):
-        variant = make_variant(scenario, document, config["seed"], k)
+        variant = make_variant(scenario, document, config["seed"], k, ranges)
         label = f"variant-{k:02d}"
         loaded = with_rollouts(write_variant(variant, folder / f"{label}.yaml"), config["rollouts"])
         sub = folder / label
@@ -222,10 +263,12 @@ def _run_variants(
                 resume=(sub / "campaign.json").is_file(),
                 stream=campaign_stream,
                 decide=config["decide"],
+                task_index=task_index,
             )
         new_trials += result.new_trials
         campaign_s += result.elapsed_s
         row = variant_statistics(variant, label, result.summary, result.records, names)
+        row["object"] = scenario.mission[task_index].object
         done.append(row)
         records.extend({**r, "variant": k} for r in result.records)
         remaining = (k_total - k - 1) * n * len(names)
@@ -376,7 +419,7 @@ def _suite_summary(
 ) -> dict[str, Any]:
     return {
         **config,
-        "alternatives": list(scenario.mission[0].alternatives),
+        "alternatives": list(scenario.mission[config["task"]].alternatives),
         "ordering": scenario.risk.ordering,
         "folder": str(folder),
         "variants_run": len(rows),
@@ -417,10 +460,10 @@ def _num(x: float | None, fmt: str = ".2f") -> str:
 
 def _draws_text(row: dict[str, Any]) -> str:
     d = row["draws"]
-    objects = list(d["objects"].values())
+    objects = d["objects"]
     if not objects:
         return f"table {100 * d['table_height_change_m']:+.1f} cm"
-    o = objects[0]
+    o = objects.get(row.get("object") or "", next(iter(objects.values())))  # the task's object
     size = "x".join(f"{100 * s:.0f}" for s in o["size"])
     return (
         f"yaw {o['yaw_change_deg']:+.0f}deg {o['mass_kg']:.2f}kg {size}cm mu {o['friction']:.2f} "

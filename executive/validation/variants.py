@@ -3,23 +3,31 @@
 Variant ``k`` of a scenario is drawn by a generator seeded from ``(seed, k)``
 (``numpy.random.default_rng([seed, k])``, a ``SeedSequence`` of both), so a suite
 is reproducible and variant ``k`` does not depend on how many others are drawn.
-Every draw is uniform in :class:`VariationRanges` (defaults):
+Every draw is uniform in :class:`VariationRanges` (defaults; a scene family gives its own,
+:mod:`executive.validation.variation_ranges`):
 
 * the table top rises or sinks by up to 5 cm; what rests on it moves with it;
 * each object turns by up to +-45 degrees of yaw, weighs 0.2-3 kg, has friction 0.4-1.2
   and each of its extents scaled by 0.7-1.3 (a square box keeps a square footprint);
-* objects, obstacles and each transfer target shift by up to +-10 cm along x and y.
+* objects, obstacles and each task's target shift by up to +-10 cm along x and y;
+  bodies the ranges fix stay as they are.
+
+What of the scene a task depends on is its kind's to say
+(:meth:`executive.tasks.base.TaskKind.varied_points`): a target (a transfer's, a place's, a
+push's) is drawn on its own; a point on a body (a press's) moves as that body does.
 
 A drawn scene is kept only when it is physically valid (:func:`scene_problem`):
 what rested on the table still rests on it, every footprint lies on the table top,
 no object is within ``clearance_m`` of an obstacle or another object (coal
-distances between the shapes), the object at each target does not overlap an
-obstacle, the object keeps its long axis (the one the hand's forearm lies along)
-and the scene loads and compiles. An invalid draw is redrawn, at most
-``max_redraws`` times; the redraws and their reasons are returned with the variant.
+distances between the shapes), a moved obstacle keeps that clearance from the bodies it
+kept it from before, the object at each target (with the objects where the tasks before
+left them) neither leaves the table nor comes that near another body, an object keeps its
+long axis (the one the hand's forearm lies along) and the scene loads and compiles. An
+invalid draw is redrawn, at most ``max_redraws`` times; the redraws and their reasons are
+returned with the variant.
 
 The variant is a YAML document: the scenario's own file with the ``scene`` block
-and the transfer targets replaced (:func:`write_variant`), which
+and the tasks' varied points replaced (:func:`write_variant`), which
 :func:`executive.scenario.load` reads back.
 """
 
@@ -41,8 +49,10 @@ from numpy.typing import NDArray
 from executive.errors import ExecutiveError, ScenarioError
 from executive.risk.shapes import body_geometry
 from executive.schema.readers import TOLERANCE, over_table, vertical_half_extent
-from executive.schema.types import Body, Scenario, SceneConfig, Table
-from executive.tasks.transfer import TransferTask
+from executive.schema.types import Body, Scenario, SceneConfig, Table, Task
+from executive.tasks.registry import get as task_kind
+from executive.tasks.variation import VariedPoint
+from executive.validation.variation_ranges import VariationRanges, check_names
 
 __all__ = [
     "Variant",
@@ -51,24 +61,11 @@ __all__ = [
     "make_variant",
     "scene_problem",
     "variant_trial_seed",
+    "varied_points",
     "write_variant",
 ]
 
 FloatArray = NDArray[np.float64]
-
-
-@dataclass(frozen=True)
-class VariationRanges:
-    """The ranges variants are drawn from (uniform), and what a valid scene keeps."""
-
-    yaw_deg: float = 45.0  # object yaw change, +- (deg)
-    mass_kg: tuple[float, float] = (0.2, 3.0)  # object mass (kg)
-    scale: tuple[float, float] = (0.7, 1.3)  # factor on each extent of an object
-    friction: tuple[float, float] = (0.4, 1.2)  # object sliding friction coefficient
-    position_m: float = 0.10  # shift of objects, obstacles and targets along x and y, +- (m)
-    table_height_m: float = 0.05  # table top height change, +- (m)
-    clearance_m: float = 0.01  # least gap between an object (or its target pose) and any other body (m)
-    max_redraws: int = 200  # invalid draws tolerated per variant before giving up
 
 
 @dataclass(frozen=True)
@@ -121,19 +118,23 @@ def make_variant(
         The first valid draw, with the count of invalid ones before it.
 
     Raises:
-        ExecutiveError: no valid scene in ``ranges.max_redraws`` + 1 draws.
+        ExecutiveError: no valid scene in ``ranges.max_redraws`` + 1 draws; a body the ranges
+            name is not in the scene (a ScenarioError).
     """
     from executive.scenario import from_dict
 
     r = ranges or VariationRanges()
+    check_names(r, [b.name for b in _bodies(base.scene)], base.name, "the variation ranges")
     rng = np.random.default_rng([seed, index])
     resting = {b.name for b in _bodies(base.scene) if _rests_on_table(b, base.scene.table)}
+    # A wall standing on the table's edge rests on it but is not checked to stay inside it.
+    inside = {b.name for b in _bodies(base.scene) if _over_table(b, base.scene.table)}
     rejections: dict[str, int] = {}
     from_dict(document, f"{base.name} (the document variants are drawn from)")  # its own errors first
     last = ""
     for attempt in range(r.max_redraws + 1):
-        scene, targets, draws = _draw(base, rng, r)
-        doc = _variant_document(base, document, scene, targets, index, seed)
+        scene, points, draws = _draw(base, rng, r)
+        doc = _variant_document(base, document, scene, points, index, seed)
         problem = _shape_problem(base.scene, scene)
         scenario: Scenario | None = None
         if problem is None:
@@ -142,7 +143,9 @@ def make_variant(
             except ScenarioError as exc:
                 problem = f"invalid: {exc}"
         if scenario is not None and problem is None:
-            problem = scene_problem(scenario, resting, r.clearance_m) or _world_problem(scenario)
+            problem = scene_problem(scenario, resting, r.clearance_m, base.scene, inside) or _world_problem(
+                scenario
+            )
         if problem is None and scenario is not None:
             return Variant(index, doc, scenario, draws, attempt, rejections)
         last = problem or "invalid"
@@ -197,6 +200,10 @@ def _rests_on_table(body: Body, table: Table) -> bool:
     return over_table(table, body.position[0], body.position[1]) and abs(bottom - table.height) <= TOLERANCE
 
 
+def _over_table(body: Body, table: Table) -> bool:
+    return all(over_table(table, x, y) for x, y, _ in _outline(body))
+
+
 def _scaled(body: Body, rng: np.random.Generator, low: float, high: float) -> tuple[float, ...]:
     """Each extent times a factor in [low, high]; a square box's footprint stays square."""
     factors = rng.uniform(low, high, len(body.size))
@@ -211,20 +218,36 @@ def _moved(body: Body, dx: float, dy: float, dz: float) -> tuple[float, float, f
     return (x + dx, y + dy, z + dz)
 
 
+Points = list[dict[str, tuple[float, float, float | None]]]  # per task: its block's key -> the point
+
+
+def varied_points(task: Task) -> tuple[VariedPoint, ...]:
+    """The points of ``task``'s block a variant moves, as its kind says (:mod:`executive.tasks.variation`)."""
+    return task_kind(task.kind).varied_points(task)
+
+
 def _draw(
     base: Scenario, rng: np.random.Generator, r: VariationRanges
-) -> tuple[SceneConfig, list[tuple[float, float, float | None]], dict[str, Any]]:
-    """One draw, in a fixed order: table, then each object, each obstacle, each task's target."""
+) -> tuple[SceneConfig, Points, dict[str, Any]]:
+    """One draw, in a fixed order: table, then each object, each obstacle, each task's points.
+
+    A fixed body draws as any other (so the other draws do not depend on which are fixed) and
+    keeps its own values.
+    """
     table = base.scene.table
     dz = float(rng.uniform(-r.table_height_m, r.table_height_m))
     draws: dict[str, Any] = {"table_height_change_m": round(dz, 4), "objects": {}, "obstacles": {}}
+    shifts: dict[str, tuple[float, float]] = {}
     objects = []
     for body in base.scene.objects:
         dyaw = math.radians(float(rng.uniform(-r.yaw_deg, r.yaw_deg)))
         mass = float(rng.uniform(*r.mass_kg))
         size = _scaled(body, rng, *r.scale)
         friction = float(rng.uniform(*r.friction))
-        dx, dy = rng.uniform(-r.position_m, r.position_m, 2)
+        limit = r.body_shift(body.name, obstacle=False)
+        dx, dy = (float(v) for v in rng.uniform(-limit, limit, 2))
+        if body.name in r.fixed:
+            dyaw, mass, size, friction = 0.0, body.mass or mass, body.size, body.friction
         roll, pitch, yaw = body.orientation_rad
         objects.append(
             dataclasses.replace(
@@ -233,29 +256,40 @@ def _draw(
                 mass=mass,
                 friction=friction,
                 orientation_rad=(roll, pitch, yaw + dyaw),
-                position=_moved(body, float(dx), float(dy), dz),
+                position=_moved(body, dx, dy, dz),
             )
         )
+        shifts[body.name] = (dx, dy)
         draws["objects"][body.name] = {
             "yaw_change_deg": round(math.degrees(dyaw), 2),
             "mass_kg": round(mass, 3),
             "size": [round(s, 4) for s in size],
             "friction": round(friction, 3),
-            "shift_m": [round(float(dx), 4), round(float(dy), 4)],
+            "shift_m": [round(dx, 4), round(dy, 4)],
         }
     obstacles = []
     for body in base.scene.obstacles:
-        dx, dy = rng.uniform(-r.position_m, r.position_m, 2)
-        obstacles.append(dataclasses.replace(body, position=_moved(body, float(dx), float(dy), dz)))
-        draws["obstacles"][body.name] = {"shift_m": [round(float(dx), 4), round(float(dy), 4)]}
-    targets: list[tuple[float, float, float | None]] = []
-    for i, task in enumerate(transfers(base)):
-        dx, dy = rng.uniform(-r.position_m, r.position_m, 2)
-        z = None if task.to[2] is None else task.to[2] + dz
-        targets.append((task.to[0] + float(dx), task.to[1] + float(dy), z))
-        draws[f"task{i}_target_shift_m"] = [round(float(dx), 4), round(float(dy), 4)]
+        limit = r.body_shift(body.name, obstacle=True)
+        dx, dy = (float(v) for v in rng.uniform(-limit, limit, 2))
+        obstacles.append(dataclasses.replace(body, position=_moved(body, dx, dy, dz)))
+        shifts[body.name] = (dx, dy)
+        if limit > 0.0:
+            draws["obstacles"][body.name] = {"shift_m": [round(dx, 4), round(dy, 4)]}
+    points: Points = []
+    for i, task in enumerate(base.mission):
+        moved: dict[str, tuple[float, float, float | None]] = {}
+        for vp in varied_points(task):
+            if vp.follows:
+                dx, dy = shifts.get(vp.follows, (0.0, 0.0))
+            else:
+                dx, dy = (float(v) for v in rng.uniform(-r.target_shift, r.target_shift, 2))
+                label = "target" if vp.key == "to" else vp.key
+                draws[f"task{i}_{label}_shift_m"] = [round(dx, 4), round(dy, 4)]
+            x, y, z = vp.point
+            moved[vp.key] = (x + dx, y + dy, None if z is None else z + dz)
+        points.append(moved)
     new_table = dataclasses.replace(table, height=table.height + dz)
-    return SceneConfig(new_table, tuple(objects), tuple(obstacles)), targets, draws
+    return SceneConfig(new_table, tuple(objects), tuple(obstacles)), points, draws
 
 
 def _shape_problem(base: SceneConfig, scene: SceneConfig) -> str | None:
@@ -304,7 +338,7 @@ def _variant_document(
     base: Scenario,
     document: dict[str, Any],
     scene: SceneConfig,
-    targets: list[tuple[float, float, float | None]],
+    points: Points,
     index: int,
     seed: int,
 ) -> dict[str, Any]:
@@ -324,8 +358,10 @@ def _variant_document(
         "objects": [_body_document(b, _rests_on_table(old[b.name], base_table)) for b in scene.objects],
         "obstacles": [_body_document(b, _rests_on_table(old[b.name], base_table)) for b in scene.obstacles],
     }
-    for item, (x, y, z) in zip(doc["mission"], targets, strict=True):
-        item["transfer"]["to"] = [_r(x), _r(y)] if z is None else [_r(x), _r(y), _r(z)]
+    for item, task, moved in zip(doc["mission"], base.mission, points, strict=True):
+        block = item[task.kind] if isinstance(item.get(task.kind), dict) else item  # or a dotted kind's
+        for key, (x, y, z) in moved.items():
+            block[key] = [_r(x), _r(y)] if z is None else [_r(x), _r(y), _r(z)]
     # The variant is one scene the executive estimates and decides on once (its physics check
     # included); its trials vary the truth only, from truth seeds of its own (a variant that
     # reused the base's would draw the same truth errors as every other variant).
@@ -382,34 +418,22 @@ def _distance(a: Body, b: Body) -> float:
     return float(coal.distance(body_geometry(a), ta, body_geometry(b), tb, request, coal.DistanceResult()))
 
 
-def transfers(scenario: Scenario) -> list[TransferTask]:
-    """The mission's tasks, each a transfer (variants move transfer targets).
-
-    Raises:
-        ExecutiveError: a task of another kind.
-    """
-    others = sorted({t.kind for t in scenario.mission if not isinstance(t, TransferTask)})
-    if others:
-        raise ExecutiveError(
-            f"variants are made of transfer missions; this one has {', '.join(others)} tasks"
-        )
-    return [t for t in scenario.mission if isinstance(t, TransferTask)]
+def _at_point(body: Body, point: VariedPoint, table: Table) -> Body:
+    """``body`` left at ``point`` (resting on the table when the point has no z)."""
+    roll, pitch, yaw = body.orientation_rad
+    rpy = (roll, pitch, yaw if point.yaw_rad is None else point.yaw_rad)
+    x, y, z = point.point
+    at_z = table.height + vertical_half_extent(body.shape, body.size, rpy) if z is None else z
+    return dataclasses.replace(body, position=(x, y, at_z), orientation_rad=rpy)
 
 
-def _at_target(scenario: Scenario) -> Iterator[Body]:
-    """Each task's object placed at its target (resting on the table when the target has no z)."""
-    table = scenario.scene.table
-    objects = {b.name: b for b in scenario.scene.objects}
-    for task in transfers(scenario):
-        body = objects[task.object]
-        roll, pitch, yaw = body.orientation_rad
-        rpy = (roll, pitch, yaw if task.to_yaw_rad is None else task.to_yaw_rad)
-        half = vertical_half_extent(body.shape, body.size, rpy)
-        z = table.height + half if task.to[2] is None else task.to[2]
-        yield dataclasses.replace(body, position=(task.to[0], task.to[1], z), orientation_rad=rpy)
-
-
-def scene_problem(scenario: Scenario, resting: set[str], clearance: float) -> str | None:
+def scene_problem(
+    scenario: Scenario,
+    resting: set[str],
+    clearance: float,
+    base: SceneConfig | None = None,
+    inside: set[str] | None = None,
+) -> str | None:
     """Why ``scenario``'s scene is not physically valid, or None when it is.
 
     Args:
@@ -417,29 +441,70 @@ def scene_problem(scenario: Scenario, resting: set[str], clearance: float) -> st
         resting: names of the bodies that must rest on the table top.
         clearance: least distance (m) between an object (at its start or its target) and
             any other body.
+        base: the scene it was drawn from: an obstacle that moved must keep ``clearance`` from
+            every body it kept it from there (None: obstacles are not checked).
+        inside: names of the resting bodies whose footprint must stay on the table top (None:
+            all of ``resting``).
 
     Returns:
         ``"<reason>: <detail>"`` with reason ``off_table`` (a footprint leaves the table top,
         or a resting body does not rest on it), ``overlap`` (an object near an obstacle or
-        another object) or ``target`` (the object at its target leaves the table or meets a
-        body); None for a valid scene.
+        another object, a moved obstacle near another body) or ``target`` (the object at a
+        task's target, the objects where the tasks before left them, leaves the table or
+        meets a body); None for a valid scene.
     """
     table = scenario.scene.table
     for body in _bodies(scenario.scene):
         if body.name in resting:
             if not _rests_on_table(body, table):
                 return f"off_table: {body.name} does not rest on the table top"
-            if not all(over_table(table, x, y) for x, y, _ in _outline(body)):
+            if (inside is None or body.name in inside) and not _over_table(body, table):
                 return f"off_table: {body.name} reaches over the table's edge"
     objects, others = scenario.scene.objects, list(_bodies(scenario.scene))
     for body in objects:
         for other in others:
             if other.name != body.name and _distance(body, other) < clearance:
                 return f"overlap: {body.name} is within {clearance:g} m of {other.name}"
-    for task, placed in zip(transfers(scenario), _at_target(scenario), strict=True):
-        if task.to[2] is None and not all(over_table(table, x, y) for x, y, _ in _outline(placed)):
-            return f"target: {placed.name} at its target reaches over the table's edge"
-        for other in others:
-            if other.name != placed.name and _distance(placed, other) < clearance:
-                return f"target: {placed.name} at its target is within {clearance:g} m of {other.name}"
+    return _obstacle_problem(scenario.scene, base, clearance) or _target_problem(scenario, clearance)
+
+
+def _obstacle_problem(scene: SceneConfig, base: SceneConfig | None, clearance: float) -> str | None:
+    """``overlap: ...`` when a moved obstacle comes within ``clearance`` of a body it was clear of."""
+    if base is None:
+        return None
+    before = {b.name: b for b in base.obstacles}
+    for body in scene.obstacles:
+        old = before.get(body.name)
+        if old is None or old.position == body.position:
+            continue
+        for other in scene.obstacles:
+            if other.name == body.name or _distance(body, other) >= clearance:
+                continue
+            if _distance(old, before.get(other.name, other)) >= clearance:
+                return f"overlap: {body.name} is within {clearance:g} m of {other.name}"
+    return None
+
+
+def _target_problem(scenario: Scenario, clearance: float) -> str | None:
+    """``target: ...`` when an object at a task's target leaves the table or meets a body.
+
+    Each target is checked against the objects where the tasks before it left them: a task
+    leaves its object at its point (``places``), a pick takes it into a hand.
+    """
+    table = scenario.scene.table
+    start = {b.name: b for b in scenario.scene.objects}
+    now = dict(start)
+    for task in scenario.mission:
+        for point in varied_points(task):
+            if not point.places or point.places not in start:
+                continue
+            placed = _at_point(start[point.places], point, table)
+            if point.point[2] is None and not all(over_table(table, x, y) for x, y, _ in _outline(placed)):
+                return f"target: {placed.name} at its target reaches over the table's edge"
+            for other in [*scenario.scene.obstacles, *now.values()]:
+                if other.name != placed.name and _distance(placed, other) < clearance:
+                    return f"target: {placed.name} at its target is within {clearance:g} m of {other.name}"
+            now[placed.name] = placed
+        if task.object and task_kind(task.kind).leaves_held:
+            now.pop(task.object, None)
     return None
