@@ -9,7 +9,9 @@ import pytest
 import yaml
 
 from executive.execution.simulated import SimulatedRobot
-from executive.planning.plan import MOVE_TOLERANCE
+from executive.planning.plan import MOVE_TOLERANCE, AlternativePlan, Step
+from executive.planning.timing import Trajectory
+from executive.risk.fall_force import force_scale_distribution
 from executive.risk.servo import ServoSet
 from executive.risk.tracking import (
     MEASURED_SIGMA,
@@ -17,6 +19,7 @@ from executive.risk.tracking import (
     HandEnd,
     MoveEnd,
     TrackingPrediction,
+    predict_tracking,
     tracking_report,
 )
 from executive.scenario import from_dict, load
@@ -226,3 +229,68 @@ def test_the_tables_show_what_the_dry_run_refined() -> None:
     row = {"name": "left", "feasible": True, "value": 0.3, "risk": {"combined": 0.1}, "physics": without}
     assert "→ 0.021 |" in physics_table([row])
     assert "≈0 → 0.021 → 0.015 [≈0, 0.11] |" in physics_table([{**row, "physics": rolled}])
+
+
+def _push_plan(world: World, q: np.ndarray, side: str, force: np.ndarray) -> AlternativePlan:
+    """A one-knot push of the scene's block by ``side``'s hand in pose ``q`` with ``force`` (N)."""
+    task = world.scenario.mission[-1]
+    step = Step("push", f"{side}.push", side, (), carried=(side, "block"), force=tuple(force))
+    traj = Trajectory(
+        step.name, np.zeros(1), q[None, :], {side: _site(world, q, side)[None, :]}, np.zeros((1, 3)), None
+    )
+    return AlternativePlan("push", task, (step,), {step.name: traj})
+
+
+def test_a_push_s_sliding_friction_holds_the_hand_back_as_the_statics_predict() -> None:
+    """The left arm forward pushing along +x against a block's sliding friction (20 N): the statics
+    of the push's reaction at the hand site against MuJoCo's hold of that force (within 20 %, 1.5 mm);
+    a push the servos cannot give (400 N) stalls at the nominal mass."""
+    world = build(load("pick_place_push"))
+    q = _posture(world, {"left_shoulder_pitch": -1.3, "left_elbow": -0.3, "left_shoulder_roll": 0.2})
+    push = np.array([20.0, 0.0, 0.0])
+    move = predict_tracking(world, _push_plan(world, q, "left", push)).moves[0]
+    mass = float(world.model.body_mass[world.ids.object_bodies["block"]])
+    assert move.push_mass == pytest.approx(mass)
+    observed = _held(world, q, "left", -push) - _held(world, q, "left", np.zeros(3))
+    predicted = move.hands[0].error
+    print(f"predicted {np.round(predicted * 1000, 2)} mm, MuJoCo {np.round(observed * 1000, 2)} mm")
+    assert observed[0] < -0.003  # held back against the push
+    assert np.linalg.norm(predicted - observed) < 0.2 * np.linalg.norm(observed) + 0.0015
+    assert np.allclose(move.hands[0].per_kg * mass, predicted, atol=1e-6)  # linear in the block's kg
+    stalled = predict_tracking(world, _push_plan(world, q, "left", 20.0 * push)).moves[0]
+    assert not stalled.mass_range[0] <= mass <= stalled.mass_range[1]
+    p, _ = TrackingPrediction((stalled,), 0.0, 0.0, (0.0, 0.0)).probabilities()
+    assert p == pytest.approx(1.0)
+
+
+def test_a_push_s_probability_is_the_monte_carlo_of_the_block_s_mass_and_friction() -> None:
+    """A push whose hand lags near its tolerance at the block's nominal mass and friction: P(fails)
+    by quadrature over the push's force scale against sampling the truth sampler's mass and friction
+    factors (each ``max(0.2, 1 + s z)``), the stall where the scale passes the servos' range."""
+    hand = HandEnd("right", np.array([-0.021, 0.0, 0.001]), np.array([-0.02, 0.0, 0.002]), np.zeros(3))
+    move = MoveEnd("right.push", MOVE_TOLERANCE, (hand,), (-np.inf, 1.6), 0.3, push_mass=1.0)
+    carry = MoveEnd(
+        "carry",
+        MOVE_TOLERANCE,
+        (HandEnd("left", np.zeros(3), np.array([0.0, 0.0, -0.01]), np.zeros(3)),),
+        (-np.inf, np.inf),
+        0.2,
+    )
+    prediction = TrackingPrediction((move, carry), 0.5, 0.05, (0.1, 0.3))
+    p, each = prediction.probabilities()
+    rng = np.random.default_rng(5)
+    n = 400_000
+    scale = np.maximum(0.2, 1.0 + 0.1 * rng.normal(size=n)) * np.maximum(0.2, 1.0 + 0.3 * rng.normal(size=n))
+    e = hand.error + (scale - 1.0)[:, None] * hand.per_kg + rng.normal(0.0, 0.003, (n, 3))
+    failed = (np.linalg.norm(e, axis=1) > MOVE_TOLERANCE) | (scale > 1.6)
+    expected = float(failed.mean())
+    print(f"quadrature {p:.4f} (push {each[0]:.4f}), Monte Carlo {expected:.4f}")
+    assert 0.1 < expected < 0.6
+    assert each[0] == pytest.approx(expected, abs=4 * np.sqrt(expected * (1 - expected) / n) + 0.002)
+    assert p == pytest.approx(each[0], abs=1e-9) and each[1] < 1e-6  # the carry far inside
+    found = prediction.hand_at("right.push", "right")
+    assert found is not None
+    nodes, weights = force_scale_distribution(0.1, 0.3)
+    kg = float(np.sqrt(weights @ (nodes - weights @ nodes) ** 2))  # the pushed kilograms' 1-sigma
+    along = kg * float(np.linalg.norm(hand.per_kg)) / np.sqrt(3.0)
+    assert found[1] == pytest.approx(np.hypot(MEASURED_SIGMA, along), rel=1e-6)

@@ -18,8 +18,10 @@ predicts where each hand ends:
   :data:`RESIDUAL_SCALE` of itself, one factor shared by every move of the alternative (a foot
   that slid stays where it slid), plus :data:`MEASURED_SIGMA` per axis.
 
-The probability that some move fails integrates the object's mass (``uncertainty.object_mass``,
-the truth sampler's factor ``max(0.2, 1 + s z)``) and the shared factor by Gauss-Hermite
+The probability that some move fails integrates the carried object's mass
+(``uncertainty.object_mass``, the truth sampler's factor ``max(0.2, 1 + s z)``), a pushed
+object's mass times friction (the push model's force scale,
+:func:`executive.risk.fall.force_scale_distribution`) and the shared factor by Gauss-Hermite
 quadrature; given both, each hand's remaining error is an isotropic 3-D Gaussian, and its
 distance beyond the tolerance a non-central chi-square tail. Measurements: docs/risk_models.md.
 
@@ -41,6 +43,7 @@ from numpy.typing import NDArray
 
 from executive.planning.plan import MOVE_TOLERANCE, AlternativePlan, Step
 from executive.planning.timing import Trajectory
+from executive.risk.fall_force import force_scale_distribution
 from executive.risk.gaussian import ball_exceed_probability, gauss_hermite_normal
 from executive.risk.report import RiskReport
 from executive.risk.servo import Hold, ServoSet
@@ -68,8 +71,8 @@ UNMODELLED_SIGMA = 0.003
 MEASURED_SIGMA = 0.0005
 #: The truth-to-truth spread of the measured residual (dry run less statics), as a fraction of it.
 RESIDUAL_SCALE = 0.16
-#: Step kinds a hand move follows whose end the tracking model checks (a push's end is the push
-#: model's, a press and a walk have behaviours of their own).
+#: Step kinds whose end the tracking model does not check (a press and a walk have behaviours of
+#: their own); a push is checked where it pushes (:func:`_pushed`), not on its way down.
 _UNTRACKED = ("push", "press", "step", "grasp", "release")
 _GRAVITY = np.array([0.0, 0.0, -9.81])
 #: Every third knot's torques (the minimum-jerk timing's accelerations change smoothly between them).
@@ -101,6 +104,9 @@ class MoveEnd:
     peak_ratio: the largest |torque| / limit a servo needs along the move (gravity, the plan's
         accelerations and the object's load; above 1 it lags there and catches up by the end).
     measured: the hands' errors are the dry run's.
+    push_mass: kg of the object the move pushes (0: it pushes none). Its hands' ``per_kg`` and its
+        ``mass_range`` are then per kg of that object at its nominal friction (a truth's mass
+        and friction factors scale the kilograms alike: the load is ``mu m g``).
     """
 
     name: str
@@ -109,15 +115,21 @@ class MoveEnd:
     mass_range: tuple[float, float]
     peak_ratio: float
     measured: bool = False
+    push_mass: float = 0.0
 
 
 @dataclass(frozen=True)
 class TrackingPrediction:
-    """Every tracked move of an alternative and the carried object's mass (nominal, 1-sigma)."""
+    """Every tracked move of an alternative and the carried object's mass (nominal, 1-sigma).
+
+    push_sigmas: a pushed object's relative 1-sigma mass and friction errors (the scenario's
+    ``uncertainty.object_mass`` and ``uncertainty.friction``).
+    """
 
     moves: tuple[MoveEnd, ...]
     mass: float
     mass_sigma: float
+    push_sigmas: tuple[float, float] = (0.0, 0.0)
 
     def measured(self, record: Mapping[str, Mapping[str, Sequence[float]]] | None) -> TrackingPrediction:
         """This prediction with the hands' end errors a dry run measured (``record``: per move, per
@@ -148,7 +160,11 @@ class TrackingPrediction:
         if found is None or hand is None:
             return None
         spread = np.hypot(MEASURED_SIGMA, RESIDUAL_SCALE * float(np.linalg.norm(hand.residual)))
-        spread = np.hypot(spread, self.mass_sigma * float(np.linalg.norm(hand.per_kg)) / np.sqrt(3.0))
+        kg = self.mass_sigma
+        if found.push_mass > 0.0:
+            scale, weight = force_scale_distribution(*self.push_sigmas)
+            kg = found.push_mass * float(np.sqrt(weight @ (scale - weight @ scale) ** 2))
+        spread = np.hypot(spread, kg * float(np.linalg.norm(hand.per_kg)) / np.sqrt(3.0))
         return hand.error, float(spread)
 
     def probabilities(self, order: int = 12) -> tuple[float, FloatArray]:
@@ -157,23 +173,28 @@ class TrackingPrediction:
             return 0.0, np.zeros(0)
         shared, w_shared = _nodes(order, any(m.measured for m in self.moves))
         mass, w_mass = _mass_nodes(self.mass, self.mass_sigma, order)
-        ok = np.ones((len(shared), len(mass)))
+        pushes = any(m.push_mass > 0.0 for m in self.moves)
+        scale, w_scale = force_scale_distribution(*self.push_sigmas) if pushes else (np.ones(1), np.ones(1))
+        ok = np.ones((len(shared), len(mass), len(scale)))
         each = np.zeros(len(self.moves))
         for k, move in enumerate(self.moves):
-            held = (mass >= move.mass_range[0]) & (mass <= move.mass_range[1])
-            stays = np.ones((len(shared), len(mass))) * held[None, :]
+            # A pushed object's kilograms (times its friction's factor) or the carried object's.
+            kg = (move.push_mass * scale)[None, None, :] if move.push_mass > 0.0 else mass[None, :, None]
+            nominal = move.push_mass if move.push_mass > 0.0 else self.mass
+            stays = ((kg >= move.mass_range[0]) & (kg <= move.mass_range[1])).astype(float)
             sigma = MEASURED_SIGMA if move.measured else UNMODELLED_SIGMA
             for hand in move.hands:
                 mean = (
-                    hand.error[None, None, :]
-                    + (mass - self.mass)[None, :, None] * hand.per_kg[None, None, :]
-                    + (RESIDUAL_SCALE * shared)[:, None, None] * hand.residual[None, None, :]
+                    hand.error
+                    + (kg - nominal)[..., None] * hand.per_kg
+                    + (RESIDUAL_SCALE * shared)[:, None, None, None] * hand.residual
                 )
-                beyond = _beyond(np.linalg.norm(mean, axis=-1), sigma, move.tolerance)
-                stays *= 1.0 - beyond
-            each[k] = 1.0 - float(w_shared @ stays @ w_mass)
-            ok *= stays
-        return float(np.clip(1.0 - w_shared @ ok @ w_mass, 0.0, 1.0)), np.clip(each, 0.0, 1.0)
+                stays = stays * (1.0 - _beyond(np.linalg.norm(mean, axis=-1), sigma, move.tolerance))
+            stays = np.broadcast_to(stays, ok.shape)
+            each[k] = 1.0 - float(w_shared @ (stays @ w_scale) @ w_mass)
+            ok = ok * stays
+        p = 1.0 - float(w_shared @ (ok @ w_scale) @ w_mass)
+        return float(np.clip(p, 0.0, 1.0)), np.clip(each, 0.0, 1.0)
 
 
 def _nodes(order: int, measured: bool) -> tuple[FloatArray, FloatArray]:
@@ -214,14 +235,24 @@ def predict_tracking(
     mass, moves = 0.0, []
     for step in plan.steps:
         traj = plan.trajectories.get(step.name)
-        if traj is None or step.kind in _UNTRACKED:
+        pushed = _pushed(step)
+        if traj is None or (step.kind in _UNTRACKED and pushed is None):
             continue
-        carried = traj.carried or step.carried
-        obj_mass = float(world.model.body_mass[world.ids.object_bodies[carried[1]]]) if carried else 0.0
-        mass = max(mass, obj_mass)
+        carried = None if pushed is not None else (traj.carried or step.carried)
+        obj = pushed or (carried[1] if carried else None)
+        obj_mass = float(world.model.body_mass[world.ids.object_bodies[obj]]) if obj else 0.0
+        if pushed is None:
+            mass = max(mass, obj_mass)
         moves.append(_move_end(world, servos, step, traj, carried, obj_mass))
-    sigma = world.scenario.uncertainty.object_mass * mass
-    return TrackingPrediction(tuple(moves), mass, sigma)
+    u = world.scenario.uncertainty
+    return TrackingPrediction(tuple(moves), mass, u.object_mass * mass, (u.object_mass, u.friction))
+
+
+def _pushed(step: Step) -> str | None:
+    """The object ``step`` pushes with a force (None: it pushes none, as on the way down)."""
+    if step.kind != "push" or step.force is None or not np.any(step.force) or not step.carried:
+        return None
+    return step.carried[1]
 
 
 def _move_end(
@@ -232,14 +263,20 @@ def _move_end(
     carried: tuple[str, str] | None,
     mass: float,
 ) -> MoveEnd:
-    """One move's end: the hold of its last knot, each hand's error, the masses its servos hold."""
+    """One move's end: the hold of its last knot, each hand's error, the masses its servos hold
+    (``carried``: what the hand carries, None for a push; ``mass``: kg of the carried or pushed object)."""
     model = world.model
     q = traj.qpos[-1]
     # A place ends with the object resting on its support: the hand holds none of its weight.
     held = carried if step.kind != "place" else None
-    load = _object_load(world, q, held) if held else np.zeros((0, model.nv))
+    pushes = _pushed(step) is not None and mass > 0.0
+    if pushes:
+        load = _push_load(world, q, step, mass)
+    else:
+        load = _object_load(world, q, held) if held else np.zeros((0, model.nv))
+    loaded = bool(held) or pushes
     hold = servos.hold(model, q, load)
-    scale = np.array([mass]) if held else np.zeros(0)
+    scale = np.array([mass]) if loaded else np.zeros(0)
     dq = hold.total(servos.dofs, scale)
     hands = []
     with scratch_data(model) as data:
@@ -249,10 +286,25 @@ def _move_end(
         for side in traj.hand_paths:
             jac = np.zeros((3, model.nv))
             mujoco.mj_jacSite(model, data, jac, None, world.ids.hand_sites[side])
-            per_kg = jac @ hold.deflection[1] if held else np.zeros(3)
+            per_kg = jac @ hold.deflection[1] if loaded else np.zeros(3)
             hands.append(HandEnd(side, jac @ dq, per_kg, np.zeros(3)))
     peak = _peak_ratio(world, servos, traj, carried, mass)
-    return MoveEnd(step.name, MOVE_TOLERANCE, tuple(hands), _mass_range(hold, bool(held)), peak)
+    reach = _mass_range(hold, loaded)
+    return MoveEnd(step.name, MOVE_TOLERANCE, tuple(hands), reach, peak, push_mass=mass if pushes else 0.0)
+
+
+def _push_load(world: World, qpos: FloatArray, step: Step, mass: float) -> FloatArray:
+    """(1, nv) the generalised force on the robot of a push's sliding friction per kg of the pushed
+    object: the reaction ``-F / m`` of the step's force (:func:`executive.tasks.push.push_force`,
+    Coulomb ``mu m g`` along the push) at the pushing hand's site, ``J^T (-F / m)``."""
+    model = world.model
+    jac = np.zeros((3, model.nv))
+    with scratch_data(model) as data:
+        data.qpos[:] = qpos
+        mujoco.mj_kinematics(model, data)
+        mujoco.mj_comPos(model, data)
+        mujoco.mj_jacSite(model, data, jac, None, world.ids.hand_sites[step.side])
+    return (jac.T @ (-np.asarray(step.force, dtype=float) / mass))[None, :]
 
 
 def _object_load(world: World, qpos: FloatArray, carried: tuple[str, str]) -> FloatArray:
