@@ -23,6 +23,39 @@ G1_MJCF = G1_DIR / "g1_with_hands.xml"
 #: (a safety net, not a measure: a loaded 2-core machine ran a 10 s run for over 120 s).
 HANG_S = 900.0
 
+#: Two pads on slide joints pressing a free box (motor forces ``ctrl``), gravity (gx, 0, gz): the
+#: standalone grip the hold models are checked against (tests/test_risk_hold.py, test_grasp_hold.py).
+PAD_GRIP_XML = """
+<mujoco>
+  <option timestep="0.002" integrator="implicitfast" cone="elliptic" impratio="10" gravity="{gx} 0 {gz}"/>
+  <default>
+    <geom condim="4"/>
+    <default class="pad">
+      <geom type="box" size="{hx} 0.005 {hz}" friction="{mu} 0.02 0.001" priority="1"
+            solref="0.004 1" solimp="0.95 0.99 0.001" mass="0.16"/>
+    </default>
+  </default>
+  <worldbody>
+    <body name="pad_a" pos="0 {ya} 0">
+      <joint name="ja" type="slide" axis="0 -1 0" damping="50"/>
+      <geom name="pad_a" class="pad"/>
+    </body>
+    <body name="pad_b" pos="0 {yb} 0">
+      <joint name="jb" type="slide" axis="0 1 0" damping="50"/>
+      <geom name="pad_b" class="pad"/>
+    </body>
+    <body name="box" pos="{dx} 0 0">
+      <freejoint/>
+      <geom name="box" type="box" size="{bx} {by} {bz}" mass="{m}" friction="1 0.01 0.001"/>
+    </body>
+  </worldbody>
+  <actuator>
+    <motor joint="ja"/>
+    <motor joint="jb"/>
+  </actuator>
+</mujoco>
+"""
+
 
 def g1_floor_yaml(mjcf: Path, com: float | None = None) -> str:
     """The Unitree G1 on open floor, a table with a book behind it (out of its walks' way).

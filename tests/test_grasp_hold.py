@@ -19,41 +19,11 @@ import numpy as np
 import pytest
 
 from executive.risk.hold import CarrySpan, Grip, contact_parameters, slip_critical_mass
+from tests.conftest import PAD_GRIP_XML
 
 G = 9.81
 PAD_HALF = (0.015, 0.03)  # along x (lateral) and z (approach)
 BOX_HALF = (0.06, 0.04, 0.06)
-
-_XML = """
-<mujoco>
-  <option timestep="0.002" integrator="implicitfast" cone="elliptic" impratio="10" gravity="{gx} 0 {gz}"/>
-  <default>
-    <geom condim="4"/>
-    <default class="pad">
-      <geom type="box" size="{hx} 0.005 {hz}" friction="{mu} 0.02 0.001" priority="1"
-            solref="0.004 1" solimp="0.95 0.99 0.001" mass="0.16"/>
-    </default>
-  </default>
-  <worldbody>
-    <body name="pad_a" pos="0 {ya} 0">
-      <joint name="ja" type="slide" axis="0 -1 0" damping="50"/>
-      <geom name="pad_a" class="pad"/>
-    </body>
-    <body name="pad_b" pos="0 {yb} 0">
-      <joint name="jb" type="slide" axis="0 1 0" damping="50"/>
-      <geom name="pad_b" class="pad"/>
-    </body>
-    <body name="box" pos="{dx} 0 0">
-      <freejoint/>
-      <geom name="box" type="box" size="{bx} {by} {bz}" mass="{m}" friction="1 0.01 0.001"/>
-    </body>
-  </worldbody>
-  <actuator>
-    <motor joint="ja"/>
-    <motor joint="jb"/>
-  </actuator>
-</mujoco>
-"""
 
 
 def _gravity(theta: float) -> np.ndarray:
@@ -66,7 +36,7 @@ def _model(
 ) -> mujoco.MjModel:
     gx, _, gz = _gravity(theta)
     bx, by, bz = half
-    xml = _XML.format(
+    xml = PAD_GRIP_XML.format(
         gx=gx, gz=gz, ya=by + 0.005, yb=-by - 0.005, hx=PAD_HALF[0], hz=PAD_HALF[1], mu=mu, dx=dx,
         bx=bx, by=by, bz=bz, m=m,
     )  # fmt: skip

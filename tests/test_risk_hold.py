@@ -46,47 +46,17 @@ from executive.risk.hold import (
 from executive.scenario import load, loads
 from executive.tasks.steps import build_subtree, plan_alternative
 from executive.world.model import Perturbation, World, build, sample_perturbation
+from tests.conftest import PAD_GRIP_XML
 
 G = 9.81
 PAD_HALF = (0.015, 0.03)  # along x (lateral) and z (approach)
 BOX_HALF = (0.08, 0.05, 0.05)
 
-_XML = """
-<mujoco>
-  <option timestep="0.002" integrator="implicitfast" cone="elliptic" impratio="10" gravity="0 0 {gz}"/>
-  <default>
-    <geom condim="4"/>
-    <default class="pad">
-      <geom type="box" size="{hx} 0.005 {hz}" friction="{mu} 0.02 0.001" priority="1"
-            solref="0.004 1" solimp="0.95 0.99 0.001" mass="0.16"/>
-    </default>
-  </default>
-  <worldbody>
-    <body name="pad_a" pos="0 {ya} 0">
-      <joint name="ja" type="slide" axis="0 -1 0" damping="50"/>
-      <geom name="pad_a" class="pad"/>
-    </body>
-    <body name="pad_b" pos="0 {yb} 0">
-      <joint name="jb" type="slide" axis="0 1 0" damping="50"/>
-      <geom name="pad_b" class="pad"/>
-    </body>
-    <body name="box" pos="{dx} 0 0">
-      <freejoint/>
-      <geom name="box" type="box" size="{bx} {by} {bz}" mass="{m}" friction="1 0.01 0.001"/>
-    </body>
-  </worldbody>
-  <actuator>
-    <motor joint="ja"/>
-    <motor joint="jb"/>
-  </actuator>
-</mujoco>
-"""
-
 
 def _model(m: float, mu: float, a: float, dx: float = 0.0) -> mujoco.MjModel:
     bx, by, bz = BOX_HALF
-    xml = _XML.format(
-        gz=-(G + a), ya=by + 0.005, yb=-by - 0.005, hx=PAD_HALF[0], hz=PAD_HALF[1], mu=mu, dx=dx,
+    xml = PAD_GRIP_XML.format(
+        gx=0.0, gz=-(G + a), ya=by + 0.005, yb=-by - 0.005, hx=PAD_HALF[0], hz=PAD_HALF[1], mu=mu, dx=dx,
         bx=bx, by=by, bz=bz, m=m,
     )  # fmt: skip
     return mujoco.MjModel.from_xml_string(xml)
@@ -301,8 +271,8 @@ def test_a_thumb_against_fingers_hand_is_modelled_by_its_squeeze(g1_scenario_yam
 
 @pytest.mark.parametrize(("priority", "pad_mu", "box_scale"), [(1, 0.8, 2.0), (0, 0.8, 2.0), (0, 1.5, 0.5)])
 def test_contact_friction_is_mixed_as_mujoco_mixes_it(priority: int, pad_mu: float, box_scale: float) -> None:
-    xml = _XML.format(
-        gz=-G, ya=0.055, yb=-0.055, hx=PAD_HALF[0], hz=PAD_HALF[1], mu=pad_mu, dx=0.0,
+    xml = PAD_GRIP_XML.format(
+        gx=0.0, gz=-G, ya=0.055, yb=-0.055, hx=PAD_HALF[0], hz=PAD_HALF[1], mu=pad_mu, dx=0.0,
         bx=BOX_HALF[0], by=BOX_HALF[1], bz=BOX_HALF[2], m=1.0,
     )  # fmt: skip
     xml = xml.replace('priority="1"', f'priority="{priority}"')
