@@ -31,6 +31,7 @@ import py_trees
 from behaviours.guard import install_monitor
 from behaviours.robot_access import install
 from behaviours.step import Step
+from benchmarks.g1_scenes import G1_MJCF, g1_floor_yaml
 from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.detectors import DetectorThresholds, FailureDetector
 from executive.monitoring.live_risk import LiveRiskMonitor
@@ -42,7 +43,6 @@ from executive.tasks.steps import build_subtree, plan_alternative
 from executive.world.model import World, build, sample_perturbation
 
 ROOT = Path(__file__).resolve().parents[1]
-G1_MJCF = ROOT.parent / "shared" / "robots" / "unitree_g1" / "g1_with_hands.xml"
 Status = py_trees.common.Status
 #: Limits no walk reaches: the largest slides are measured, nothing trips.
 OUT_OF_REACH = DetectorThresholds(foot_slip=1.0, foot_slip_yaw_deg=90.0)
@@ -52,22 +52,14 @@ def scene(robot: str) -> Scenario:
     """The robot's walk: its first task."""
     if robot == "humanoid":
         return load(ROOT / "scenarios" / "walk_to_table.yaml")
-    return loads(
-        f"""
-name: g1_walk
-description: The G1 walks 0.15 m forward on open floor, a table behind it.
-robot: {{mjcf: {G1_MJCF}, profile: unitree_g1}}
-scene:
-  table: {{position: [-0.65, 0.0], size: [0.4, 0.8, 0.04], height: 0.66}}
-  objects:
-    - {{name: book, shape: box, size: [0.14, 0.09, 0.05], position: [-0.55, 0.2], mass: 0.3}}
-  obstacles: []
-uncertainty: {{com: 0.01}}
-mission:
-  - step: {{to: [0.15, 0.0]}}
-""",
-        source="g1_walk.yaml",
+    walk = g1_floor_yaml(
+        G1_MJCF,
+        0.01,
+        name="g1_walk",
+        description="The G1 walks 0.15 m forward on open floor, a table behind it.",
+        mission="  - step: {to: [0.15, 0.0]}\n",
     )
+    return loads(walk, source="g1_walk.yaml")
 
 
 def slippery(world: World, friction: float) -> World:

@@ -28,6 +28,7 @@ import py_trees
 from behaviours.guard import RiskGuard, install_monitor
 from behaviours.robot_access import install
 from behaviours.step import HOLDS, Step, foot_force
+from benchmarks.g1_scenes import G1_MJCF, g1_floor_yaml
 from executive.execution.simulated import SimulatedRobot
 from executive.monitoring.live_risk import LiveRiskMonitor
 from executive.planning.stepping import Foothold, StepPlan, StepPlanner
@@ -36,7 +37,6 @@ from executive.schema.types import Scenario
 from executive.world.model import build
 
 ROOT = Path(__file__).resolve().parents[1]
-G1_MJCF = ROOT.parent / "shared" / "robots" / "unitree_g1" / "g1_with_hands.xml"
 Status = py_trees.common.Status
 #: Per robot: the step (dx, m) and the push magnitudes (N), about 0.2 and 0.35 of its weight.
 ROBOTS = {"humanoid": (0.12, (150.0, 250.0)), "g1": (0.10, (40.0, 70.0))}
@@ -56,21 +56,7 @@ def scene(robot: str) -> Scenario:
     """The robot on open floor."""
     if robot == "humanoid":
         return load(ROOT / "scenarios" / "fall_steps.yaml")
-    return loads(
-        f"""
-name: g1_floor
-description: The G1 on open floor, a table behind it.
-robot: {{mjcf: {G1_MJCF}, profile: unitree_g1}}
-scene:
-  table: {{position: [-0.65, 0.0], size: [0.4, 0.8, 0.04], height: 0.66}}
-  objects:
-    - {{name: book, shape: box, size: [0.14, 0.09, 0.05], position: [-0.55, 0.2], mass: 0.3}}
-  obstacles: []
-mission:
-  - transfer: {{object: book, to: [-0.55, -0.2]}}
-""",
-        source="g1_floor.yaml",
-    )
+    return loads(g1_floor_yaml(G1_MJCF), source="g1_floor.yaml")
 
 
 def plan_step(scenario: Scenario, dx: float) -> StepPlan:

@@ -17,26 +17,10 @@ import shutil
 import sys
 from pathlib import Path
 
+from benchmarks.g1_scenes import G1_MJCF, g1_book_yaml
+
 ROOT = Path(__file__).resolve().parents[1]
-G1_MJCF = ROOT.parent / "shared" / "robots" / "unitree_g1" / "g1_with_hands.xml"
 RANGES = ROOT / "benchmarks" / "variation" / "g1_book_transfer.yaml"
-
-
-def g1_book_yaml(mjcf: Path) -> str:
-    """The G1 book scene (tests/conftest.py's ``g1_scenario_yaml``) with its MJCF at ``mjcf``."""
-    return f"""name: g1_book_transfer
-description: The book transfer scene around the Unitree G1 with Dex3 hands.
-robot: {{mjcf: {mjcf}, profile: unitree_g1}}
-scene:
-  table: {{position: [0.47, 0.0], size: [0.50, 1.0, 0.04], height: 0.66}}
-  objects:
-    - {{name: book, shape: box, size: [0.14, 0.09, 0.05], position: [0.30, 0.22], mass: 0.3}}
-  obstacles:
-    - {{name: book_stack, shape: box, size: [0.16, 0.12, 0.22], position: [0.48, 0.0]}}
-uncertainty: {{object_position: 0.01, object_yaw: 3, obstacle_position: 0.01, com: 0.01}}
-mission:
-  - transfer: {{object: book, to: [0.30, -0.22]}}
-"""
 
 
 def write(folder: Path) -> Path:
