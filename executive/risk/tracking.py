@@ -1,29 +1,13 @@
 """The tracking mode: a hand that ends a move farther from its planned end than the move allows.
 
-A move (:class:`behaviours.move_hand.MoveHand`) fails with the verdict ``tracking`` when, once
-its trajectory has played and the hands have had time to settle, a hand is more than
-:data:`~executive.planning.plan.MOVE_TOLERANCE` from its planned end. Per move the model
-predicts where each hand ends:
-
-* the servos' static error at the move's end knot (:class:`executive.risk.servo.ServoSet`): a
-  joint target clipped at its servo's range, a carried object's weight (per kilogram, so that
-  the truth's mass scales it; a place ends with the object on its support, its weight off the
-  hand), the whole body held on its two feet; a servo that cannot give the torque holding the
-  pose stalls (the move fails);
-* what the statics do not see (the floating base sliding or lagging while the robot balances,
-  the settling of a move that has just ended): before a physics run, a spread of
-  :data:`UNMODELLED_SIGMA` per axis; after the decision's dry run (the plan executed on the
-  estimate), the hand's end error it measured (:meth:`TrackingPrediction.measured`), whose
-  difference from the statics (the residual) varies from truth to truth by
-  :data:`RESIDUAL_SCALE` of itself, one factor shared by every move of the alternative (a foot
-  that slid stays where it slid), plus :data:`MEASURED_SIGMA` per axis.
-
-The probability that some move fails integrates the carried object's mass
-(``uncertainty.object_mass``, the truth sampler's factor ``max(0.2, 1 + s z)``), a pushed
-object's mass times friction (the push model's force scale,
-:func:`executive.risk.fall.force_scale_distribution`) and the shared factor by Gauss-Hermite
-quadrature; given both, each hand's remaining error is an isotropic 3-D Gaussian, and its
-distance beyond the tolerance a non-central chi-square tail. Measurements: docs/risk_models.md.
+A move (:class:`behaviours.move_hand.MoveHand`) fails with the verdict ``tracking`` when a hand
+settles more than :data:`~executive.planning.plan.MOVE_TOLERANCE` from its planned end. Per move
+the model predicts where each hand ends from the servos' statics
+(:class:`executive.risk.servo.ServoSet`: a clipped joint target, a carried object's weight or a
+pushed object's friction, the body held on its feet; a servo short of torque stalls), with
+:data:`UNMODELLED_SIGMA` for what the statics miss, or the end errors the decision's dry run
+measured (:meth:`TrackingPrediction.measured`). The model, its probability and its
+measurements: docs/risk_models.md, "Tracking".
 
 Usage::
 
