@@ -254,19 +254,19 @@ def _move_end(
     # A place ends with the object resting on its support: the hand holds none of its weight.
     held = carried if step.kind != "place" else None
     pushes = _pushed(step) is not None and mass > 0.0
-    if pushes:
-        load = _push_load(world, q, step, mass)
-    else:
-        load = _object_load(world, q, held) if held else np.zeros((0, model.nv))
     loaded = bool(held) or pushes
-    hold = servos.hold(model, q, load)
-    scale = np.array([mass]) if loaded else np.zeros(0)
-    dq = hold.total(servos.dofs, scale)
     hands = []
     with scratch_data(model) as data:
         data.qpos[:] = q
         mujoco.mj_kinematics(model, data)
         mujoco.mj_comPos(model, data)
+        if pushes:
+            load = _push_load(world, data, step, mass)
+        else:
+            load = _object_load(world, data, held) if held else np.zeros((0, model.nv))
+        hold = servos.hold(model, q, load)
+        scale = np.array([mass]) if loaded else np.zeros(0)
+        dq = hold.total(servos.dofs, scale)
         for side in traj.hand_paths:
             jac = np.zeros((3, model.nv))
             mujoco.mj_jacSite(model, data, jac, None, world.ids.hand_sites[side])
@@ -277,33 +277,25 @@ def _move_end(
     return MoveEnd(step.name, MOVE_TOLERANCE, tuple(hands), reach, peak, push_mass=mass if pushes else 0.0)
 
 
-def _push_load(world: World, qpos: FloatArray, step: Step, mass: float) -> FloatArray:
+def _push_load(world: World, data: mujoco.MjData, step: Step, mass: float) -> FloatArray:
     """(1, nv) the generalised force on the robot of a push's sliding friction per kg of the pushed
     object: the reaction ``-F / m`` of the step's force (:func:`executive.tasks.push.push_force`,
-    Coulomb ``mu m g`` along the push) at the pushing hand's site, ``J^T (-F / m)``."""
-    model = world.model
-    jac = np.zeros((3, model.nv))
-    with scratch_data(model) as data:
-        data.qpos[:] = qpos
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
-        mujoco.mj_jacSite(model, data, jac, None, world.ids.hand_sites[step.side])
+    Coulomb ``mu m g`` along the push) at the pushing hand's site, ``J^T (-F / m)`` (``data``:
+    the move's end pose, its kinematics computed)."""
+    jac = np.zeros((3, world.model.nv))
+    mujoco.mj_jacSite(world.model, data, jac, None, world.ids.hand_sites[step.side])
     return (jac.T @ (-np.asarray(step.force, dtype=float) / mass))[None, :]
 
 
-def _object_load(world: World, qpos: FloatArray, carried: tuple[str, str]) -> FloatArray:
+def _object_load(world: World, data: mujoco.MjData, carried: tuple[str, str]) -> FloatArray:
     """(1, nv) the generalised force of 1 kg at the carried object's centre of mass, held by the
-    hand: ``J^T m g`` with ``J`` the hand body's Jacobian at that point (the object's own dofs 0)."""
+    hand: ``J^T m g`` with ``J`` the hand body's Jacobian at that point (the object's own dofs 0;
+    ``data``: the move's end pose, its kinematics computed)."""
     model = world.model
     side, obj = carried
     hand = int(model.body(world.profile.arms[side].hand_body).id)
     jac = np.zeros((3, model.nv))
-    with scratch_data(model) as data:
-        data.qpos[:] = qpos
-        mujoco.mj_kinematics(model, data)
-        mujoco.mj_comPos(model, data)
-        point = data.xipos[world.ids.object_bodies[obj]]
-        mujoco.mj_jac(model, data, jac, None, point, hand)
+    mujoco.mj_jac(model, data, jac, None, data.xipos[world.ids.object_bodies[obj]], hand)
     return (jac.T @ _GRAVITY)[None, :]
 
 
