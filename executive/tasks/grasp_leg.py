@@ -1,11 +1,11 @@
 """One hand moves an object with a chosen grasp (:mod:`executive.tasks.grasp_candidates`).
 
-A grasp from above is the one-hand leg every transfer had (:func:`executive.tasks.phases.one_hand_leg`),
-its jaws across the object's local y (``top``) or x (``top_across``: the same leg with the
-object's axes turned a quarter turn). A level grasp (``front``, ``side``) comes in along its
-approach at the height the candidate chose, closes, lifts, carries the object in the same lane
-in front of what is in the way (the hand's frame turned about the vertical with the object's
-yaw), puts it down and backs out along the approach before it goes home.
+Every grasp takes the one-hand leg (:func:`executive.tasks.phases.one_hand_leg`). From above,
+the jaws close across the object's local y (``top``) or x (``top_across``: the same leg with the
+object's axes turned a quarter turn). A grasp from a side (``front``, ``side``; a
+:class:`LevelGrip`) comes in along its approach at the height the candidate chose, carries the
+object in the same lane (the hand's frame turned about the vertical with the object's yaw), puts
+it down and backs out along the approach before it goes home.
 
 Usage::
 
@@ -15,6 +15,7 @@ Usage::
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 import mujoco
 import numpy as np
@@ -24,10 +25,10 @@ from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import HandTarget
 from executive.schema.types import Body
 from executive.tasks.grasp_candidates import GRASPS, GraspCandidate
-from executive.tasks.hands import UP, HandFrames
-from executive.tasks.phases import one_hand_layout, one_hand_leg
+from executive.tasks.hands import HandFrames
+from executive.tasks.phases import one_hand_leg, turned_about_z
 
-__all__ = ["grasp_leg", "turned"]
+__all__ = ["LevelGrip", "grasp_leg", "turned"]
 
 FloatArray = NDArray[np.float64]
 
@@ -40,10 +41,20 @@ def turned(quat: FloatArray, angle: float) -> FloatArray:
     return out
 
 
-def _about_z(vector: FloatArray, angle: float) -> FloatArray:
-    c, s = math.cos(angle), math.sin(angle)
-    x, y, z = (float(v) for v in vector)
-    return np.array([c * x - s * y, s * x + c * y, z])
+@dataclass(frozen=True)
+class LevelGrip:
+    """A grasp from a side (:class:`executive.tasks.phases.Grip`): the candidate's hand frame, its
+    site offset from the object's centre, both turned about the vertical with the object."""
+
+    side: str
+    offset: FloatArray  # the site's level offset from the object's centre at the pick
+    quat: FloatArray  # the candidate's site frame at the pick (w x y z)
+    approach: FloatArray
+
+    def at(self, point: FloatArray, hand_yaw: float, grasp_yaw: float | None = None) -> HandTarget:
+        """See :class:`executive.tasks.phases.Grip`."""
+        angle = 0.0 if grasp_yaw is None else hand_yaw - grasp_yaw
+        return HandTarget(self.side, point + turned_about_z(self.offset, angle), turned(self.quat, angle))
 
 
 def grasp_leg(
@@ -67,55 +78,16 @@ def grasp_leg(
         cfg: the composition's geometry.
 
     Returns:
-        pre-grasp, approach, grasp, lift, the lane carry, pre-place, place, release, retreat, home.
+        the steps of :func:`executive.tasks.phases.one_hand_leg` with the candidate's grip.
     """
     kind = GRASPS[candidate.grasp]
     (pos, yaw), (centre, end_yaw) = start, end
     if not kind.level:
         quarter = 0.0 if kind.closing == "object_y" else math.pi / 2
         return one_hand_leg(h, side, body, (pos, yaw + quarter), (centre, end_yaw + quarter), cfg)
-    layout = one_hand_layout(h, side, body, start, end, cfg, grasp_z=float(candidate.site[2]))
     offset = np.asarray(candidate.site, dtype=float) - np.asarray(pos, dtype=float)
     offset[2] = 0.0  # the site's level offset from the centre; the layout has its height
-    turn = end_yaw - yaw
-
-    def at(point: FloatArray, angle: float) -> HandTarget:
-        return HandTarget(side, point + _about_z(offset, angle), turned(candidate.quat, angle))
-
-    grasp, place_at = layout.grasp, layout.place_at
-    approach = np.asarray(candidate.approach, dtype=float)
-    back_out = _about_z(approach, turn)
-    obj, carried = body.name, (side, body.name)
-    lane_in, lane_out = layout.lane
-    return [
-        Step("move", f"{side}.pre_grasp", side, (at(grasp - cfg.approach_height * approach, 0.0),)),
-        Step("move", f"{side}.approach", side, (at(grasp, 0.0),), allow_contact=(obj,)),
-        Step("grasp", f"{side}.grasp", side, obj=obj),
-        Step("lift", f"{side}.lift", side, (at(grasp + cfg.lift_height * UP, 0.0),), carried=carried),
-        Step("carry", f"{side}.to_lane", side, (at(lane_in, turn / 2),), carried=carried),
-        Step("carry", f"{side}.transfer", side, (at(lane_out, turn / 2),), carried=carried),
-        Step(
-            "carry",
-            f"{side}.pre_place",
-            side,
-            (at(place_at + cfg.approach_height * UP, turn),),
-            carried=carried,
-        ),
-        Step(
-            "place",
-            f"{side}.place",
-            side,
-            (at(place_at, turn),),
-            carried=carried,
-            allow_contact=("table_top",),
-        ),
-        Step("release", f"{side}.release", side, obj=obj),
-        Step(
-            "retreat",
-            f"{side}.retreat",
-            side,
-            (at(place_at - cfg.approach_height * back_out, turn),),
-            allow_contact=(obj,),
-        ),
-        Step("home", f"{side}.home", side, (h.home[side],), obj=obj),
-    ]
+    grip = LevelGrip(
+        side, offset, np.asarray(candidate.quat, dtype=float), np.asarray(candidate.approach, dtype=float)
+    )
+    return one_hand_leg(h, side, body, start, end, cfg, grip, grasp_z=float(candidate.site[2]))

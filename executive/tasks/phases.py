@@ -2,23 +2,29 @@
 
 Each returns the :class:`Step` list of one hand for one phase; a kind strings phases
 together (``transfer`` = pick + lane carry + place; ``pick`` = pick + hold;
-``place`` = place from the holding hand). Grasps are top-down, the jaws closing
+``place`` = place from the holding hand). A :class:`Grip` says where the hand goes for a point
+and yaw and which way it comes in: :class:`TopDown` (the default) from above, the jaws closing
 across the object's local y extent (:class:`executive.tasks.hands.HandFrames`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+import math
+from dataclasses import dataclass, field, replace
+from typing import Protocol
 
 import numpy as np
 from numpy.typing import NDArray
 
 from executive.planning.plan import CompositionConfig, Step
+from executive.planning.planner import HandTarget
 from executive.schema.types import Body, SceneConfig
 from executive.tasks.hands import UP, HandFrames
 
 __all__ = [
+    "Grip",
     "OneHandLayout",
+    "TopDown",
     "back_along_lane",
     "carry_lane_front",
     "grasp_height",
@@ -28,9 +34,47 @@ __all__ = [
     "pick",
     "place",
     "reached_through",
+    "turned_about_z",
 ]
 
 FloatArray = NDArray[np.float64]
+
+
+def turned_about_z(vector: FloatArray, angle: float) -> FloatArray:
+    """``vector`` turned by ``angle`` (rad) about the world's vertical."""
+    c, s = math.cos(angle), math.sin(angle)
+    x, y, z = (float(v) for v in vector)
+    return np.array([c * x - s * y, s * x + c * y, z])
+
+
+class Grip(Protocol):
+    """How one hand holds an object along a leg: its target for a point and yaw, its way in
+    (``approach``; it backs out along it, turned with the object, after the place)."""
+
+    @property
+    def approach(self) -> FloatArray:
+        """The unit direction of the hand's travel onto the object at the pick."""
+        ...
+
+    def at(self, point: FloatArray, hand_yaw: float, grasp_yaw: float | None = None) -> HandTarget:
+        """The hand's target at ``point`` (the layout's hand site) with the object at ``hand_yaw``.
+
+        ``grasp_yaw``: the object's yaw when the hand grasped it (None: not grasped yet).
+        """
+        ...
+
+
+@dataclass(frozen=True)
+class TopDown:
+    """The grasp from above (:meth:`executive.tasks.hands.HandFrames.target`)."""
+
+    h: HandFrames
+    side: str
+    approach: FloatArray = field(default_factory=lambda: -UP)
+
+    def at(self, point: FloatArray, hand_yaw: float, grasp_yaw: float | None = None) -> HandTarget:
+        """See :class:`Grip`."""
+        return self.h.target(self.side, point, hand_yaw, grasp_yaw)
 
 
 def grasp_height(body: Body, centre_z: float, cfg: CompositionConfig) -> float:
@@ -39,19 +83,25 @@ def grasp_height(body: Body, centre_z: float, cfg: CompositionConfig) -> float:
 
 
 def pick(
-    h: HandFrames, side: str, obj: str, grasp: FloatArray, yaw: float, cfg: CompositionConfig
+    h: HandFrames,
+    side: str,
+    obj: str,
+    grasp: FloatArray,
+    yaw: float,
+    cfg: CompositionConfig,
+    grip: Grip | None = None,
 ) -> list[Step]:
-    """Over the object, down onto it (the open jaws may touch it), close, lift it ``lift_height``."""
+    """In along the grip's approach onto the object (the open jaws may touch it), close, lift it.
+
+    ``grip``: the grasp (default :class:`TopDown`: over the object, then down).
+    """
+    g = TopDown(h, side) if grip is None else grip
     return [
-        Step("move", f"{side}.pre_grasp", side, (h.target(side, grasp + cfg.approach_height * UP, yaw),)),
-        Step("move", f"{side}.approach", side, (h.target(side, grasp, yaw),), allow_contact=(obj,)),
+        Step("move", f"{side}.pre_grasp", side, (g.at(grasp - cfg.approach_height * g.approach, yaw),)),
+        Step("move", f"{side}.approach", side, (g.at(grasp, yaw),), allow_contact=(obj,)),
         Step("grasp", f"{side}.grasp", side, obj=obj),
         Step(
-            "lift",
-            f"{side}.lift",
-            side,
-            (h.target(side, grasp + cfg.lift_height * UP, yaw, yaw),),
-            carried=(side, obj),
+            "lift", f"{side}.lift", side, (g.at(grasp + cfg.lift_height * UP, yaw, yaw),), carried=(side, obj)
         ),
     ]
 
@@ -65,34 +115,26 @@ def place(
     grasp_yaw: float,
     cfg: CompositionConfig,
     back: tuple[Step, ...] = (),
+    grip: Grip | None = None,
 ) -> list[Step]:
-    """Over the place, down, open, up, (``back``: moves before turning home), home clear of the object."""
+    """Over the place, down, open, back out along the grip's approach, (``back``: moves before
+    turning home), home clear of the object. ``grip``: the grasp (default :class:`TopDown`)."""
+    g = TopDown(h, side) if grip is None else grip
     above = point + cfg.approach_height * UP
+    out = point - cfg.approach_height * turned_about_z(g.approach, place_yaw - grasp_yaw)
     carried = (side, obj)
     return [
-        Step(
-            "carry",
-            f"{side}.pre_place",
-            side,
-            (h.target(side, above, place_yaw, grasp_yaw),),
-            carried=carried,
-        ),
+        Step("carry", f"{side}.pre_place", side, (g.at(above, place_yaw, grasp_yaw),), carried=carried),
         Step(
             "place",
             f"{side}.place",
             side,
-            (h.target(side, point, place_yaw, grasp_yaw),),
+            (g.at(point, place_yaw, grasp_yaw),),
             carried=carried,
             allow_contact=("table_top",),
         ),
         Step("release", f"{side}.release", side, obj=obj),
-        Step(
-            "retreat",
-            f"{side}.retreat",
-            side,
-            (h.target(side, above, place_yaw, grasp_yaw),),
-            allow_contact=(obj,),
-        ),
+        Step("retreat", f"{side}.retreat", side, (g.at(out, place_yaw, grasp_yaw),), allow_contact=(obj,)),
         *back,
         # The way home keeps clear of the object just placed (a hand that rotates back to its
         # home pose can sweep its fingers into it); brushing it is tolerated (obj).
@@ -168,30 +210,21 @@ def lane_carry(
     carry_yaw: float,
     grasp_yaw: float,
     exit_yaw: float | None = None,
+    grip: Grip | None = None,
 ) -> list[Step]:
     """Back to the lane, then across the body in it (the object skirting what is in the way).
 
     The object is at ``carry_yaw`` on reaching the lane and at ``exit_yaw`` (default the same) at
-    its end: a large turn is shared between the two moves.
+    its end: a large turn is shared between the two moves. ``grip``: the grasp (default
+    :class:`TopDown`).
     """
+    g = TopDown(h, side) if grip is None else grip
     lane_in, lane_out = points
     out_yaw = carry_yaw if exit_yaw is None else exit_yaw
     carried = (side, obj)
     return [
-        Step(
-            "carry",
-            f"{side}.to_lane",
-            side,
-            (h.target(side, lane_in, carry_yaw, grasp_yaw),),
-            carried=carried,
-        ),
-        Step(
-            "carry",
-            f"{side}.transfer",
-            side,
-            (h.target(side, lane_out, out_yaw, grasp_yaw),),
-            carried=carried,
-        ),
+        Step("carry", f"{side}.to_lane", side, (g.at(lane_in, carry_yaw, grasp_yaw),), carried=carried),
+        Step("carry", f"{side}.transfer", side, (g.at(lane_out, out_yaw, grasp_yaw),), carried=carried),
     ]
 
 
@@ -245,17 +278,19 @@ def one_hand_layout(
 
 
 def back_along_lane(
-    h: HandFrames, side: str, layout: OneHandLayout, end_yaw: float, yaw: float
+    h: HandFrames, side: str, layout: OneHandLayout, end_yaw: float, yaw: float, grip: Grip | None = None
 ) -> tuple[Step, ...]:
     """The move back to the hand's own side along the lane after placing across the body, for a
-    robot whose profile asks for it (``return_along_lane``); none otherwise."""
+    robot whose profile asks for it (``return_along_lane``); none otherwise. ``grip``: the grasp
+    (default :class:`TopDown`)."""
+    g = TopDown(h, side) if grip is None else grip
     place_at, lane_x = layout.place_at, float(layout.lane[0][0])
     if not h.world.profile.return_along_lane or h.side_of_body(place_at) == h.side_of_body(
         h.home[side].position
     ):
         return ()
     back_point = np.array([lane_x, h.home[side].position[1], float(layout.lane[0][2])])
-    back = replace(h.target(side, back_point, end_yaw, yaw), frame="base")  # ahead of the hand's home
+    back = replace(g.at(back_point, end_yaw, yaw), frame="base")  # ahead of the hand's home
     return (Step("move", f"{side}.back", side, (back,)),)
 
 
@@ -266,31 +301,35 @@ def one_hand_leg(
     start: tuple[FloatArray, float],
     end: tuple[FloatArray, float],
     cfg: CompositionConfig,
+    grip: Grip | None = None,
+    grasp_z: float | None = None,
 ) -> list[Step]:
     """One hand moves ``body`` from ``start`` to ``end`` (centre, yaw), both resting: pick, carry, place.
 
-    Straight, simple hand paths: up, back to the lane, across the body in that lane (the
-    carried object skirting the front of the obstacles it passes at ``obstacle_clearance``,
-    :func:`one_hand_layout`), forward over the place, down, open, up, home. A robot whose
-    profile asks for it (``return_along_lane``) first goes back along the lane to its own side
-    after placing across the body, as it is, and only then turns home: the straight way home
-    from across the body swings the arm across the body's front while the hand turns. A hand
-    that works behind a wall it reaches past (:func:`reached_through`: a glove port) goes in
-    and out along its own line, straight ahead of its home pose, and moves sideways only
-    behind the wall.
+    Straight, simple hand paths: in along the grip's approach (default :class:`TopDown`: from
+    above), up, back to the lane, across the body in that lane (the carried object skirting the
+    front of the obstacles it passes at ``obstacle_clearance``, :func:`one_hand_layout`), over the
+    place, down, open, back out, home. A robot whose profile asks for it (``return_along_lane``)
+    first goes back along the lane to its own side after placing across the body, as it is, and
+    only then turns home: the straight way home from across the body swings the arm across the
+    body's front while the hand turns. A hand that works behind a wall it reaches past
+    (:func:`reached_through`: a glove port) goes in and out along its own line, straight ahead of
+    its home pose, and moves sideways only behind the wall. ``grasp_z``: the hand site's height
+    at the grasp (None: a top-down grasp's).
     """
+    g = TopDown(h, side) if grip is None else grip
     (_, yaw), (_, end_yaw) = start, end
-    layout = one_hand_layout(h, side, body, start, end, cfg)
+    layout = one_hand_layout(h, side, body, start, end, cfg, grasp_z)
     entry: tuple[Step, ...] = ()
     back: tuple[Step, ...] = ()
     if layout.through:
-        entry = (Step("move", f"{side}.reach_in", side, (h.target(side, layout.own_line, yaw),)),)
-        back = (Step("move", f"{side}.back", side, (h.target(side, layout.own_line, end_yaw, yaw),)),)
+        entry = (Step("move", f"{side}.reach_in", side, (g.at(layout.own_line, yaw),)),)
+        back = (Step("move", f"{side}.back", side, (g.at(layout.own_line, end_yaw, yaw),)),)
     else:
-        back = back_along_lane(h, side, layout, end_yaw, yaw)
+        back = back_along_lane(h, side, layout, end_yaw, yaw, g)
     return [
         *entry,
-        *pick(h, side, body.name, layout.grasp, yaw, cfg),
-        *lane_carry(h, side, body.name, layout.lane, (yaw + end_yaw) / 2, yaw),
-        *place(h, side, body.name, layout.place_at, end_yaw, yaw, cfg, back),
+        *pick(h, side, body.name, layout.grasp, yaw, cfg, g),
+        *lane_carry(h, side, body.name, layout.lane, (yaw + end_yaw) / 2, yaw, grip=g),
+        *place(h, side, body.name, layout.place_at, end_yaw, yaw, cfg, back, g),
     ]
