@@ -1,29 +1,14 @@
 """Quasi-static stepping: one step as five timed whole-body phases, and a walk of such steps.
 
-The public entry of the step planner (see docs/stepping.md). One step of the ``swing`` foot to a
-:class:`Foothold` (:meth:`StepPlanner.plan_step`, :func:`plan_step`) is, in order (:data:`PHASES`):
-
-1. ``shift``: both feet on the floor, the CoM moves over the middle of the stance sole;
-2. ``lift``: the swing foot rises by ``clearance``, the CoM kept inside the stance sole shrunk by
-   its margin (:meth:`StepPlanner.sole_margin`: a single-support polygon);
-3. ``swing``: the foot moves (and turns) to above its foothold;
-4. ``touchdown``: it comes down flat onto the floor;
-5. ``shift_back``: both feet on the floor, the CoM back to where the robot stood over its feet.
-
-The knees stay bent (:mod:`executive.planning.stepping_knees`), the ankles of the feet on the
-floor keep a balance reserve in their range (:mod:`executive.planning.stepping_ankles`; where that
-leaves the CoM short, the torso leans over the stance foot with the waist's roll), the torso
-within the whole-body planner's tilt limit, the pelvis above its safe posture's floor, the joints
-in their ranges and speed limits, the arms and otherwise the waist held, the swing leg clear of
-the stance leg and both legs clear of the scene. Each phase is a
-:class:`~executive.planning.timing.Trajectory` re-timed as any planned motion: minimum-jerk, the
-zero-moment point inside the phase's support polygon. "The CoM" is the robot's, or with an object
-a hand carries through the steps (``StepPlanner(world, carried=...)``) the robot's and the
-object's together (:class:`~executive.planning.loaded_com.LoadedCoM`). A foothold the leg cannot
-reach is refused with a :class:`StepPlanningError` naming the limits that bind (``binds``).
-:func:`measure_reach` measures by IK how far a foot can step; :func:`plan_steps` walks to a goal
-stance in steps within a fraction of that reach, alternating feet. The bundled physics follows a step with
-:class:`behaviours.step.Step`.
+The public entry of the step planner (docs/stepping.md). One step of the ``swing`` foot to a
+:class:`Foothold` (:meth:`StepPlanner.plan_step`, :func:`plan_step`) is, in order
+(:data:`PHASES`): ``shift`` the CoM over the stance sole, ``lift`` the swing foot, ``swing`` it
+above its foothold, ``touchdown`` flat, ``shift_back`` the CoM between the feet. Each phase is a
+:class:`~executive.planning.timing.Trajectory` timed as any planned motion, its zero-moment point
+inside the phase's support polygon; with a carried object (``StepPlanner(world, carried=...)``)
+the CoM is the robot's and the object's together. A foothold the leg cannot reach is refused
+with a :class:`StepPlanningError` naming the limits that bind (``binds``). :func:`measure_reach`
+measures how far a foot can step; :func:`plan_steps` walks to a goal stance.
 
 Usage::
 

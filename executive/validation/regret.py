@@ -1,37 +1,14 @@
 """Regret of the risk ranking: does choosing per trial beat the best fixed alternative?
 
-In trial ``t`` the executive would run the alternative with the lowest predicted value
-(the selector's number; infeasible alternatives are never chosen); a campaign that ran the
-executive's decision per trial (``--decide``) records the alternative it chose, and that is
-the choice scored (none chosen: the task is not done, a failure). Its regret is the
-failure rate of those choices minus that of the best *fixed* alternative on the same
-truths (a campaign's common random numbers): negative when the per-trial ranking
-helps, zero when it does as well as always running the best one, positive when it
-loses to it.
-
-Picking "the best fixed alternative" on the trials it is scored on biases the regret
-upwards, against the choice: the lowest of several noisy failure rates is below the
-failure probability of the alternative it belongs to (for equal alternatives the bias is
-p - E[min of the binomial counts] / n).
-Cross-fitting removes that bias (Chernozhukov et al. 2018): the trials are split by
-the parity of their index; the best alternative is picked on the even trials and
-scored, with the choice, on the odd ones, then the other way round, and the per-trial
-differences of both halves are pooled. The in-sample ("naive") regret is reported
-beside it.
-
-Failures are 0/1 per trial and alternative: any outcome but ``success``, and
-``infeasible`` counts as a failure (a fixed policy whose alternative does not plan
-does not do the task). Trials with an ``error`` record (a defect), missing records,
-or no feasible alternative carry no comparison and are left out (counted).
-
-The paired test is the exact sign test on the per-trial differences, i.e. the exact
-McNemar test (McNemar 1947): under no difference, the trials where only the choice
-failed and those where only the best failed are equally likely, so their split is
-Binomial(n_discordant, 1/2); p = min(1, 2 P(X <= min)). The interval is Newcombe's
-hybrid score interval for a difference of paired proportions (Newcombe 1998,
-method 10), from Wilson score intervals (Wilson 1927). The interval is approximate; with
-few discordant trials it can exclude 0 where the exact test does not, so significance is
-the test's.
+The choice in a trial is the alternative with the lowest predicted value (a ``--decide``
+campaign's recorded choice; none chosen: a failure). Its regret is the failure rate of the
+choices minus that of the best *fixed* alternative on the same truths: negative when the
+per-trial ranking helps. The best fixed alternative is cross-fitted (Chernozhukov et al. 2018):
+picked on the even trials and scored on the odd ones, and the other way round, which removes the
+in-sample bias against the choice (reported beside it). Failures are 0/1 per trial and
+alternative (``infeasible`` fails); trials with an ``error`` or no feasible alternative are left
+out and counted. Significance is the exact sign (McNemar) test; the interval Newcombe's
+(docs/risk_in_physics.md, "How to read the regret").
 """
 
 from __future__ import annotations

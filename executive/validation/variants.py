@@ -1,34 +1,16 @@
 """Seeded variants of a scenario's scene: the same task on scenes nobody tuned for.
 
-Variant ``k`` of a scenario is drawn by a generator seeded from ``(seed, k)``
-(``numpy.random.default_rng([seed, k])``, a ``SeedSequence`` of both), so a suite
-is reproducible and variant ``k`` does not depend on how many others are drawn.
-Every draw is uniform in :class:`VariationRanges` (defaults; a scene family gives its own,
-:mod:`executive.validation.variation_ranges`):
-
-* the table top rises or sinks by up to 5 cm; what rests on it moves with it;
-* each object turns by up to +-45 degrees of yaw, weighs 0.2-3 kg, has friction 0.4-1.2
-  and each of its extents scaled by 0.7-1.3 (a square box keeps a square footprint);
-* objects, obstacles and each task's target shift by up to +-10 cm along x and y;
-  bodies the ranges fix stay as they are.
-
-What of the scene a task depends on is its kind's to say
-(:meth:`executive.tasks.base.TaskKind.varied_points`): a target (a transfer's, a place's, a
-push's) is drawn on its own; a point on a body (a press's) moves as that body does.
-
-A drawn scene is kept only when it is physically valid (:func:`scene_problem`):
-what rested on the table still rests on it, every footprint lies on the table top,
-no object is within ``clearance_m`` of an obstacle or another object (coal
-distances between the shapes), a moved obstacle keeps that clearance from the bodies it
-kept it from before, the object at each target (with the objects where the tasks before
-left them) neither leaves the table nor comes that near another body, an object keeps its
-long axis (the one the hand's forearm lies along) and the scene loads and compiles. An
-invalid draw is redrawn, at most ``max_redraws`` times; the redraws and their reasons are
-returned with the variant.
-
-The variant is a YAML document: the scenario's own file with the ``scene`` block
-and the tasks' varied points replaced (:func:`write_variant`), which
-:func:`executive.scenario.load` reads back.
+Variant ``k`` is drawn by ``numpy.random.default_rng([seed, k])``: a suite is reproducible and
+variant ``k`` does not depend on how many others are drawn. Every draw is uniform in
+:class:`VariationRanges` (the defaults, or a scene family's own:
+:mod:`executive.validation.variation_ranges`): the table's height, each object's yaw, mass,
+friction and extents, and the positions of objects, obstacles and the tasks' varied points
+(:meth:`executive.tasks.base.TaskKind.varied_points`). A draw is kept only when it is physically
+valid (:func:`scene_problem`: resting, on the table, clear of the other bodies by coal
+distances, at the targets too, and it compiles); an invalid one is redrawn, at most
+``max_redraws`` times, the reasons returned with the variant. :func:`write_variant` writes it as
+the scenario's own YAML with the scene and the varied points replaced (docs/risk_in_physics.md,
+"Every scene family").
 """
 
 from __future__ import annotations
