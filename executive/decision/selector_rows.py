@@ -30,7 +30,8 @@ def risk_row(alt: AlternativeRisk, ordering: str) -> dict[str, Any]:
 
     Returns:
         ``name`` and ``feasible``, ``physics`` if it ran in physics; then either ``reason`` (no
-        risk; with ``binding``, the limits that held a stalled move back, when known) or ``risk``, ``breach`` (if it touches a breach obstacle), ``value``,
+        risk; with ``binding``, the limits that held a stalled move back, when known) or
+        ``risk``, ``breach`` (if it touches a breach obstacle), ``value``,
         ``planned_duration_s``, ``plan_s`` and ``assess_s``.
     """
     row: dict[str, Any] = {"name": alt.name, "feasible": alt.feasible}

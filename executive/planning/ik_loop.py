@@ -235,4 +235,5 @@ class IKLoop:
         )
         lead(problem.hands, self.configuration.data, problem.world.ids.hand_sites, goals, cfg)
         binding = active_limits(problem, self.configuration, qp, cfg.ik_dt, cfg.damping)
-        raise PlanningError(name, side, pos, ang, iterations, binding=binding)
+        stall = self.configuration.q.copy()
+        raise PlanningError(name, side, pos, ang, iterations, binding=binding, stall=stall)

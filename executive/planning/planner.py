@@ -229,6 +229,7 @@ class Planner:
             f"(robot '{self.world.profile.name}', safe_posture.max_pelvis_drop); with the pelvis "
             f"held there, {held}",
             binding=exc.binding,
+            stall=exc.stall,
         ) from exc
 
     def _move(

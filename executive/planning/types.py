@@ -107,6 +107,7 @@ class PlanningError(ExecutiveError):
         angle_error: remaining rotation of that hand to its target (rad).
         binding: the limits that held the move back where it stalled (the active set of the
             IK step's QP, :class:`Binding`); empty when not known (not an IK stall).
+        stall: the configuration (qpos) the move stalled at; None when not an IK stall.
     """
 
     def __init__(
@@ -118,6 +119,7 @@ class PlanningError(ExecutiveError):
         iterations: int,
         reason: str | None = None,
         binding: Sequence[Binding] | None = None,
+        stall: FloatArray | None = None,
     ) -> None:
         self.name = name
         self.side = side
@@ -125,6 +127,7 @@ class PlanningError(ExecutiveError):
         self.angle_error = angle_error
         self.iterations = iterations
         self.binding: tuple[Binding, ...] = tuple(binding or ())
+        self.stall = stall
         if reason is None:
             reason = (
                 f"{side} hand cannot reach target '{name}': {position_error:.3f} m and "
