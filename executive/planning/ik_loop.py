@@ -5,7 +5,8 @@ configuration: each step points the hand tasks a bounded way ahead (:func:`~exec
 solves the QP, integrates it (halved while a collision pair cuts in), projects the feet back and
 moves a hand on to the next goal of its route once near its via point; a stall relaxes the posture
 task, and a stall at the relaxation's floor fails naming what binds (the step's active set,
-:func:`~executive.planning.active_set.active_limits`). The planner (:class:`~executive.planning.planner.Planner`) re-times the path it returns.
+:func:`~executive.planning.active_set.active_limits`). The planner
+(:class:`~executive.planning.planner.Planner`) re-times the path it returns.
 """
 
 from __future__ import annotations
