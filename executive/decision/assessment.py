@@ -62,6 +62,8 @@ class AlternativeRisk:
     plan_s: float = 0.0
     assess_s: float = 0.0
     physics: dict[str, Any] | None = None  # the physics check's summary (executive.decision.physics_check)
+    # What held a move that stalled back (PlanningError.binding as plain data; empty: not known).
+    binding: tuple[dict[str, str | float], ...] = ()
 
 
 def _collision_model(ctx: PlanContext) -> RiskReport:
@@ -149,7 +151,8 @@ def _assess_alternative(
     try:
         plan = plan_alternative(planner, world, task, name, q_start)
     except PlanningError as exc:
-        return AlternativeRisk(name, False, None, None, str(exc), time.perf_counter() - t0)
+        binding = tuple(b.as_dict() for b in exc.binding)
+        return AlternativeRisk(name, False, None, None, str(exc), time.perf_counter() - t0, binding=binding)
     t1 = time.perf_counter()
     risk = assess_plan(world, plan, model)
     return AlternativeRisk(name, True, risk, plan, "", t1 - t0, time.perf_counter() - t1)

@@ -30,7 +30,8 @@ def risk_row(alt: AlternativeRisk, ordering: str) -> dict[str, Any]:
 
     Returns:
         ``name`` and ``feasible``, ``physics`` if it ran in physics; then either ``reason`` (no
-        risk) or ``risk``, ``breach`` (if it touches a breach obstacle), ``value``,
+        risk; with ``binding``, the limits that held a stalled move back, when known) or
+        ``risk``, ``breach`` (if it touches a breach obstacle), ``value``,
         ``planned_duration_s``, ``plan_s`` and ``assess_s``.
     """
     row: dict[str, Any] = {"name": alt.name, "feasible": alt.feasible}
@@ -38,6 +39,8 @@ def risk_row(alt: AlternativeRisk, ordering: str) -> dict[str, Any]:
         row["physics"] = alt.physics
     if alt.risk is None:
         row["reason"] = alt.error
+        if alt.binding:
+            row["binding"] = list(alt.binding)
         return row
     row["risk"] = alt.risk.as_dict()
     breach = breach_summary(alt.risk.components["collision"]) if "collision" in alt.risk.components else None

@@ -4,18 +4,22 @@
 configuration: each step points the hand tasks a bounded way ahead (:func:`~executive.planning.route.lead`),
 solves the QP, integrates it (halved while a collision pair cuts in), projects the feet back and
 moves a hand on to the next goal of its route once near its via point; a stall relaxes the posture
-task. The planner (:class:`~executive.planning.planner.Planner`) re-times the path it returns.
+task, and a stall at the relaxation's floor fails naming what binds (the step's active set,
+:func:`~executive.planning.active_set.active_limits`). The planner
+(:class:`~executive.planning.planner.Planner`) re-times the path it returns.
 """
 
 from __future__ import annotations
 
 import math
 import time
+from typing import NoReturn
 
 import mink
 import numpy as np
 from numpy.typing import NDArray
 
+from executive.planning.active_set import active_limits
 from executive.planning.limits import GeomPairCollisionLimit
 from executive.planning.problem import MoveQP, PlanningProblem
 from executive.planning.rotation import rotation_angle
@@ -77,14 +81,14 @@ class IKLoop:
         relax = 1.0  # scale of the posture task's cost (idle arms excepted)
         while not (self._arrived(errors) and all(stage[s] == len(goals[s]) - 1 for s in goals)):
             if iterations >= cfg.max_iterations:
-                self._fail(name, errors, iterations)
+                self._fail(name, errors, iterations, qp, active)
             if relax > cfg.relax_floor and self._stalled(history, cfg.relax_iterations):
                 # Short of the floor a short stall relaxes; at the floor only a long stall fails.
                 relax *= cfg.relax_factor
                 problem.posture.set_cost(np.where(qp.idle_dofs, qp.posture_cost, qp.posture_cost * relax))
                 history = history[-1:]
             elif self._stalled(history, cfg.stall_iterations):
-                self._fail(name, errors, iterations)
+                self._fail(name, errors, iterations, qp, active)
             lead(problem.hands, conf.data, problem.world.ids.hand_sites, active, cfg)
             tick = time.perf_counter()
             try:
@@ -216,10 +220,22 @@ class IKLoop:
     def _stalled(self, history: list[float], n: int) -> bool:
         return len(history) > n and history[-n - 1] - history[-1] < self.config.stall_improvement
 
-    def _fail(self, name: str, errors: dict[str, tuple[float, float]], iterations: int) -> None:
-        cfg = self.config
+    def _fail(
+        self,
+        name: str,
+        errors: dict[str, tuple[float, float]],
+        iterations: int,
+        qp: MoveQP,
+        goals: dict[str, mink.SE3],
+    ) -> NoReturn:
+        """Raise the error of a move that stops short: the hand farthest from its goal (relative
+        to the tolerances) and what binds there (the next step's QP's active set)."""
+        cfg, problem = self.config, self.problem
         side, (pos, ang) = max(
             errors.items(),
             key=lambda kv: max(kv[1][0] / cfg.position_tolerance, kv[1][1] / cfg.angle_tolerance_rad),
         )
-        raise PlanningError(name, side, pos, ang, iterations)
+        lead(problem.hands, self.configuration.data, problem.world.ids.hand_sites, goals, cfg)
+        binding = active_limits(problem, self.configuration, qp, cfg.ik_dt, cfg.damping)
+        stall = self.configuration.q.copy()
+        raise PlanningError(name, side, pos, ang, iterations, binding=binding, stall=stall)

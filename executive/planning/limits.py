@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import daqp  # type: ignore[import-not-found]  # no stubs; mink solves with it already (solver="daqp")
 import mink
@@ -26,6 +27,7 @@ __all__ = [
     "GeomPairCollisionLimit",
     "JointBounds",
     "PelvisHeightLimit",
+    "StepQP",
     "SupportPolygon",
     "SupportPolygonLimit",
     "TiltLimit",
@@ -206,6 +208,21 @@ class ConfigurationLimit(mink.ConfigurationLimit):
         return mink.Constraint(G=constraint.G, h=np.maximum(constraint.h, 0.0))
 
 
+class StepQP(NamedTuple):
+    """One IK step's QP in DAQP's form, ``min 1/2 x^T hessian x + linear^T x`` subject to
+    ``lower <= [x; matrix x] <= upper`` (``sense`` marks the equality rows), on the free dofs of
+    :class:`JointBounds`: the first ``len(free)`` bounds are the dofs' own (range and velocity),
+    the rest the general rows, each limit's at ``spans[i]`` (start, stop; empty when inactive)."""
+
+    hessian: FloatArray
+    linear: FloatArray
+    matrix: FloatArray
+    upper: FloatArray
+    lower: FloatArray
+    sense: NDArray[np.intc]
+    spans: list[tuple[int, int]]
+
+
 class JointBounds:
     """The joint range limit (:class:`ConfigurationLimit`) and mink's ``VelocityLimit`` as
     bounds on each dof of the step, and the IK step's QP on the dofs that may move.
@@ -304,14 +321,32 @@ class JointBounds:
 
         Raises mink.NoSolutionFound when the QP is infeasible.
         """
-        hessian, linear = self._objective(configuration, tasks, damping)
-        matrix, upper, lower, sense = self._rows(configuration, dt, limits, constraints, velocity)
-        x, _obj, exitflag, _info = daqp.solve(hessian, linear, matrix, upper, lower, sense)
+        qp = self.step_qp(configuration, tasks, dt, damping, limits, constraints, velocity)
+        x, _obj, exitflag, _info = daqp.solve(qp.hessian, qp.linear, qp.matrix, qp.upper, qp.lower, qp.sense)
         if exitflag <= 0:
             raise mink.NoSolutionFound("daqp")
         out = np.zeros(self.model.nv)
         out[self.free] = np.asarray(x) / dt
         return out
+
+    def step_qp(
+        self,
+        configuration: mink.Configuration,
+        tasks: Sequence[mink.Task],
+        dt: float,
+        damping: float,
+        limits: Sequence[mink.Limit],
+        constraints: Sequence[mink.Task],
+        velocity: bool = True,
+    ) -> StepQP:
+        """The QP :meth:`solve` hands DAQP (same arguments), with each limit's rows.
+
+        Returns:
+            The step's QP on the free dofs (:class:`StepQP`).
+        """
+        hessian, linear = self._objective(configuration, tasks, damping)
+        matrix, upper, lower, sense, spans = self._rows(configuration, dt, limits, constraints, velocity)
+        return StepQP(hessian, linear, matrix, upper, lower, sense, spans)
 
     def _objective(
         self, configuration: mink.Configuration, tasks: Sequence[mink.Task], damping: float
@@ -358,10 +393,11 @@ class JointBounds:
         limits: Sequence[mink.Limit],
         constraints: Sequence[mink.Task],
         velocity: bool,
-    ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.intc]]:
+    ) -> tuple[FloatArray, FloatArray, FloatArray, NDArray[np.intc], list[tuple[int, int]]]:
         """The step QP's constraints in DAQP's form: the general rows (limits' inequalities, then
         the constraints' equalities) on the free dofs, the upper and lower bounds of the free
-        dofs and the rows stacked, and each one's sense (equality rows marked)."""
+        dofs and the rows stacked, each one's sense (equality rows marked), and each limit's
+        rows (start, stop) among the general rows."""
         free, n = self.free, len(self.free)
         rows: list[FloatArray] = []
         upper: list[FloatArray] = []
@@ -373,12 +409,15 @@ class JointBounds:
             assert ball.G is not None and ball.h is not None
             rows.append(ball.G[-self._ball_rows :, free])
             upper.append(ball.h[-self._ball_rows :])
+        spans: list[tuple[int, int]] = []
         for limit in limits:
+            start = sum(len(r) for r in rows)
             constraint = limit.compute_qp_inequalities(configuration, dt)
             if not constraint.inactive:
                 assert constraint.G is not None and constraint.h is not None
                 rows.append(constraint.G[:, free])
                 upper.append(np.asarray(constraint.h, dtype=float))
+            spans.append((start, sum(len(r) for r in rows)))
         inequalities = sum(len(r) for r in rows)
         bounds_low.append(np.full(inequalities, -1e30))
         equalities = 0
@@ -391,7 +430,7 @@ class JointBounds:
         matrix = np.ascontiguousarray(np.vstack(rows)) if rows else np.zeros((0, n))
         sense = np.zeros(n + inequalities + equalities, dtype=np.intc)
         sense[n + inequalities :] = 5  # equality (DAQP: active and immutable), as qpsolvers sets it
-        return matrix, np.concatenate(upper), np.concatenate(bounds_low), sense
+        return matrix, np.concatenate(upper), np.concatenate(bounds_low), sense, spans
 
 
 # --- collision pairs ------------------------------------------------------------------------
@@ -481,6 +520,7 @@ class GeomPairCollisionLimit(mink.Limit):
         # configuration reuses it instead of asking MuJoCo again.
         self._cache_qpos: FloatArray | None = None
         self._cache: tuple[NDArray[np.int_], FloatArray] = (np.zeros(0, dtype=int), np.zeros(0))
+        self.row_pairs = np.zeros(0, dtype=int)  # the pair of each row of the last constraint
 
     def distances(self, data: mujoco.MjData, cutoff: float | None = None) -> FloatArray:
         """Signed distance of every pair (capped at the detection distance).
@@ -585,6 +625,7 @@ class GeomPairCollisionLimit(mink.Limit):
         # the approach per step by gain * gap (mink's own limit divides by dt as well, which
         # for dt < 1 lets a step close more than the whole gap). Inside d_min: see the class doc.
         bounds = np.where(gap > 0, self.gain * gap, -np.minimum(-self.gain * gap, self.recovery))
+        self.row_pairs = near
         return mink.Constraint(G=rows, h=bounds)
 
 

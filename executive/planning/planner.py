@@ -228,6 +228,8 @@ class Planner:
             f"allows: planned without that limit it takes {problem.posture_limits.describe_drop(needed)} "
             f"(robot '{self.world.profile.name}', safe_posture.max_pelvis_drop); with the pelvis "
             f"held there, {held}",
+            binding=exc.binding,
+            stall=exc.stall,
         ) from exc
 
     def _move(

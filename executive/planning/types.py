@@ -17,6 +17,8 @@ from numpy.typing import NDArray
 from executive.errors import ExecutiveError
 
 __all__ = [
+    "Binding",
+    "BindingKind",
     "HandTarget",
     "PlanStats",
     "PlannerConfig",
@@ -36,6 +38,65 @@ FloatArray = NDArray[np.float64]
 Relative = tuple[int, int, int, mink.SE3]
 
 
+#: What a :class:`Binding` can be: the kinds of limit of the IK step's QP.
+BindingKind = Literal["collision", "joint_range", "joint_velocity", "pelvis", "tilt", "balance", "ball_joint"]
+
+
+@dataclass(frozen=True)
+class Binding:
+    """One limit of the IK step's QP that holds a stalled move back (an active constraint).
+
+    Found by :func:`executive.planning.active_set.active_limits`; a :class:`PlanningError`
+    names them (``binding``), and ``as_dict`` is their form in ``executive plan --json`` and
+    the audit log.
+
+    Attributes:
+        kind: which limit (:data:`BindingKind`).
+        name: what it holds: the geom pair ``"a vs b"``, the joint's name, ``pelvis``,
+            ``torso`` or ``CoM``.
+        value: where that is now: the pair's distance (m), the joint's angle (rad, or its
+            step's rate in rad/s for a velocity limit), the pelvis's drop below standing (m),
+            the torso's tilt (deg), the CoM's distance inside the support polygon's edge (m).
+        bound: the limit's value, in the same unit: the pair's required clearance, the
+            joint's range bound or velocity limit, the safe posture's largest drop, the
+            largest tilt, the support margin.
+        side: ``upper`` or ``lower`` for a joint's bound, else empty.
+        multiplier: the constraint's Lagrange multiplier in the step's QP (absolute): how
+            hard it holds the step back (comparable between rows of one kind).
+    """
+
+    kind: BindingKind
+    name: str
+    value: float
+    bound: float
+    side: str = ""
+    multiplier: float = 0.0
+
+    def describe(self) -> str:
+        """The binding in words, for a message."""
+        if self.kind == "collision":
+            return f"{self.name} at {self.value:.3f} m (clearance {self.bound:.3f} m)"
+        if self.kind == "joint_range":
+            return f"{self.name} at its {self.side} limit ({self.bound:.2f} rad)"
+        if self.kind == "joint_velocity":
+            return f"{self.name} at its velocity limit ({self.bound:.2f} rad/s)"
+        if self.kind == "pelvis":
+            return f"the pelvis {self.value:.3f} m below standing, at the {self.bound:.2f} m posture limit"
+        if self.kind == "tilt":
+            return f"the torso's tilt at its limit ({self.value:.1f} of {self.bound:.0f} deg)"
+        if self.kind == "balance":
+            return f"the CoM {self.value:.3f} m inside the support polygon's edge (margin {self.bound:.3f} m)"
+        return f"{self.name} at its range"
+
+    def as_dict(self) -> dict[str, str | float]:
+        """The binding as plain data (JSON, the audit log): the attributes by name."""
+        out: dict[str, str | float] = {"kind": self.kind, "name": self.name, "value": self.value}
+        out |= {"bound": self.bound, "multiplier": self.multiplier}
+        if self.side:
+            out["side"] = self.side
+        return out
+
+
 class PlanningError(ExecutiveError):
     """A motion could not be planned: a hand target out of reach, or a balance or QP failure.
 
@@ -44,6 +105,9 @@ class PlanningError(ExecutiveError):
         side: the hand that fell short (None when no hand is to blame).
         position_error: remaining distance of that hand to its target (m).
         angle_error: remaining rotation of that hand to its target (rad).
+        binding: the limits that held the move back where it stalled (the active set of the
+            IK step's QP, :class:`Binding`); empty when not known (not an IK stall).
+        stall: the configuration (qpos) the move stalled at; None when not an IK stall.
     """
 
     def __init__(
@@ -54,17 +118,27 @@ class PlanningError(ExecutiveError):
         angle_error: float,
         iterations: int,
         reason: str | None = None,
+        binding: Sequence[Binding] | None = None,
+        stall: FloatArray | None = None,
     ) -> None:
         self.name = name
         self.side = side
         self.position_error = position_error
         self.angle_error = angle_error
         self.iterations = iterations
+        self.binding: tuple[Binding, ...] = tuple(binding or ())
+        self.stall = stall
         if reason is None:
             reason = (
                 f"{side} hand cannot reach target '{name}': {position_error:.3f} m and "
                 f"{np.degrees(angle_error):.1f} deg short after {iterations} iterations"
             )
+            if binding is not None:
+                reason += "; binding: " + (
+                    ", ".join(b.describe() for b in binding)
+                    if binding
+                    else "no limit active (the IK's tasks balance short of the target)"
+                )
         super().__init__(reason)
 
 

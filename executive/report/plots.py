@@ -152,6 +152,8 @@ def risk_json(scenario: Scenario, tasks: Sequence[tuple[str, Sequence[Alternativ
                 row["physics"] = alt.physics
             if alt.risk is None:
                 row["error"] = alt.error
+                if alt.binding:  # a move that stalled: the limits that held it back
+                    row["binding"] = list(alt.binding)
             else:
                 r = alt.risk
                 row["risk"] = {
