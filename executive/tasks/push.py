@@ -289,6 +289,7 @@ def push_steps(world: World, task: PushTask, side: str, cfg: CompositionConfig) 
             carried=(side, obj),
             allow_contact=(obj, "table_top"),
             force=(force[0], force[1], force[2]),
+            straight=True,
         )
         for k in range(1, legs + 1)
     ]
