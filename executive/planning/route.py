@@ -166,7 +166,8 @@ def hand_routes(
             moving.append(carried_geom)
         extent = footprint(model, data, site, moving)
         start = data.site_xpos[site].copy()
-        vias = [] if straight else via_points(start, np.asarray(t.position, dtype=float), extent, boxes, clearance)
+        goal = np.asarray(t.position, dtype=float)
+        vias = [] if straight else via_points(start, goal, extent, boxes, clearance)
         routes[t.side] = [se3(v, t.quat) for v in vias] + [se3(t.position, t.quat)]
     return routes
 
