@@ -10,7 +10,7 @@ leaves it, along or across. Predicted: :func:`executive.risk.push_contact.loss_p
 of the leg's offsets against the face's half width (4 cm) and of the fingertips over the
 block's top, with 2 mm of object position error and the tracking statics' 3 mm height spread.
 
-Run: ``python benchmarks/bench_push_contact.py`` (a few seconds). Results: docs/risk_models.md,
+Run: ``python benchmarks/bench_push_contact.py`` (about 25 s). Results: docs/risk_models.md,
 "A push's stall".
 """
 
@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import dataclass
 
 import mujoco
 
@@ -57,12 +58,14 @@ _XML = """
 """
 
 
+@dataclass(frozen=True)
 class PushRun:
     """One push in MuJoCo: the block's end offset from a straight push's (m) and the finger's height
     above its planned end (m)."""
 
-    def __init__(self, along: float, across: float, finger_up: float) -> None:
-        self.along, self.across, self.finger_up = along, across, finger_up
+    along: float
+    across: float
+    finger_up: float
 
     @property
     def lost(self) -> bool:

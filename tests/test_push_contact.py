@@ -16,6 +16,7 @@ import yaml
 
 from benchmarks.bench_push_contact import predicted_loss, run_push
 from executive.planning.planner import Planner
+from executive.risk.gaussian import normal_cdf
 from executive.risk.push_contact import loss_probability
 from executive.scenario.loader import load
 from executive.tasks.steps import plan_alternative
@@ -37,8 +38,6 @@ def test_the_model_calls_which_swings_lose_the_block(mass: float, friction: floa
 
 def test_the_loss_probability_is_the_face_interval_and_the_top() -> None:
     # Offsets 0..30 mm on a 40 mm half face, 10 mm object error: the object must lie in [-10, 40].
-    from executive.risk.gaussian import normal_cdf
-
     p = loss_probability((0.0, 0.03), 0.04, -0.05, 0.01, 0.003)
     assert p == pytest.approx(1.0 - float(normal_cdf(4.0) - normal_cdf(-1.0)), abs=1e-12)
     # A swing wider than the face leaves it whatever the object's offset.
