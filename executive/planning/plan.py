@@ -56,7 +56,9 @@ class Step:
     ``force``: the force (N, world frame) the hand exerts on the environment during a push or a press
     (the robot feels its reaction); ``hold_s``: how long a press keeps that force.
     ``stance``: a ``step`` (a walk, ``side`` the foot that leads): the pelvis's goal (x, y, yaw rad;
-    yaw None: as it stands).
+    yaw None: as it stands). ``straight``: the hand keeps to the straight line to its target, with
+    no via points over what lies beside it (a contact motion: a push's legs stay on the object's
+    face; :meth:`executive.planning.planner.Planner.move`).
     """
 
     kind: StepKind
@@ -69,6 +71,7 @@ class Step:
     force: tuple[float, float, float] | None = None
     hold_s: float = 0.0
     stance: tuple[float, float, float | None] | None = None
+    straight: bool = False
 
 
 @dataclass(frozen=True)

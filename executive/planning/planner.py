@@ -169,13 +169,17 @@ class Planner:
         carried: tuple[str, str] | None = None,
         allow_contact: Sequence[str] = (),
         rest: bool = False,
+        straight: bool = False,
     ) -> Trajectory:
         """Plan the whole body from ``q_start`` until every target hand is at its target.
 
         The posture task pulls the arms towards the home keyframe; the legs and waist hold
         their start angles (the body moves only as far as the hands need, so a short hand
         move is a short whole-body move), unless ``rest``: a return to the rest pose, where
-        the legs and waist are pulled towards the keyframe too.
+        the legs and waist are pulled towards the keyframe too. A hand heads for its target
+        over via points that lift it over what lies in its way
+        (:func:`executive.planning.route.hand_routes`), unless ``straight``: a contact motion
+        (a push's leg) keeps to the straight line, the collision limit alone keeping it clear.
 
         The pelvis stays inside the robot's safe posture (``profile.safe_posture``): a target
         the hands reach only with the pelvis lower than that is refused with the depth it
@@ -186,11 +190,13 @@ class Planner:
         remaining position and angle errors, or the safe posture's limit that holds it back.
         """
         try:
-            return self._move(q_start, targets, name, carried, allow_contact, rest, posture=True)
+            return self._move(
+                q_start, targets, name, carried, allow_contact, rest, posture=True, straight=straight
+            )
         except PlanningError as exc:
             if self._ik.lowest > self.problem.pelvis_floor + 2.0 * PELVIS_QP_MARGIN:
                 raise  # the pelvis limit did not hold the hands back
-            self._posture_failure(exc, q_start, targets, name, carried, allow_contact, rest)
+            self._posture_failure(exc, q_start, targets, name, carried, allow_contact, rest, straight)
             raise
 
     def _posture_failure(
@@ -202,11 +208,14 @@ class Planner:
         carried: tuple[str, str] | None,
         allow_contact: Sequence[str],
         rest: bool,
+        straight: bool,
     ) -> None:
         """Plan a failed move again without the pelvis limit; raise the posture's named reason
         when that reaches the targets with the pelvis below the safe posture (else return)."""
         try:
-            free = self._move(q_start, targets, name, carried, allow_contact, rest, posture=False)
+            free = self._move(
+                q_start, targets, name, carried, allow_contact, rest, posture=False, straight=straight
+            )
         except PlanningError:
             return
         problem = self.problem
@@ -242,6 +251,7 @@ class Planner:
         rest: bool,
         *,
         posture: bool,
+        straight: bool = False,
     ) -> Trajectory:
         """:meth:`move`, with the safe posture's pelvis limit in the QP if ``posture``."""
         started = time.perf_counter()
@@ -250,7 +260,9 @@ class Planner:
         conf = self.configuration
         conf.update(np.array(q_start, dtype=float))
         allowed = problem.collisions.allowed_geoms(allow_contact)
-        goals = hand_routes(model, conf.data, ids, targets, carried, allowed, cfg.via_clearance)
+        goals = hand_routes(
+            model, conf.data, ids, targets, carried, allowed, cfg.via_clearance, straight=straight
+        )
         qp = problem.move_qp(conf, goals, carried, allow_contact, rest, posture)
         clearance0 = qp.collisions.distances(conf.data)
         # What a step may not cut below: the required clearance (or the start distance, when a

@@ -248,6 +248,7 @@ def replan_rest(planner: Planner, world: World, request: RestanceRequest) -> dic
             carried=step.carried,
             allow_contact=step.allow_contact,
             rest=step.kind == "home",
+            straight=step.straight,
         )
         trajectories[step.name] = traj
         q = traj.qpos[-1]

@@ -128,8 +128,15 @@ def hand_routes(
     carried: tuple[str, str] | None,
     allowed: set[int],
     clearance: float,
+    *,
+    straight: bool = False,
 ) -> dict[str, list[mink.SE3]]:
     """Per moving hand: via points over the obstacles and objects in its way, then its target.
+
+    The footprint is a world-aligned box about the hand and what it carries, so a hand turned
+    across its way (a push's, the palm across the push) overlaps neighbours it does not touch.
+    A contact motion (``straight``: a push's leg, whose hand must stay on the object's face) has
+    no via points: its target alone, the collision limit keeping the arm clear.
 
     Args:
         model: the planner's model.
@@ -139,6 +146,7 @@ def hand_routes(
         carried: (hand side, object name) of a carried object, which moves with that hand.
         allowed: geoms the hands may touch (not in the way).
         clearance: the footprint's clearance above (or below) what it passes (m).
+        straight: no via points (the straight line to each target).
 
     Returns:
         Each moving hand's goals (side -> poses), the target last.
@@ -158,7 +166,8 @@ def hand_routes(
             moving.append(carried_geom)
         extent = footprint(model, data, site, moving)
         start = data.site_xpos[site].copy()
-        vias = via_points(start, np.asarray(t.position, dtype=float), extent, boxes, clearance)
+        goal = np.asarray(t.position, dtype=float)
+        vias = [] if straight else via_points(start, goal, extent, boxes, clearance)
         routes[t.side] = [se3(v, t.quat) for v in vias] + [se3(t.position, t.quat)]
     return routes
 

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from executive.planning.timing import Trajectory
 from executive.risk.fall import ExternalForce, force_scale_distribution
 from executive.risk.gaussian import normal_cdf
+from executive.risk.push_contact import face_contact
 from executive.risk.report import RiskReport
 from executive.schema.types import RiskConfig, Uncertainty
 from executive.world.model import World
@@ -297,11 +298,14 @@ def assess_placement(
     scene's ``object_position``) stays: per force scale node, P = 1 if stalled, else
     ``P(|e| > tol - c F) = 2 Phi(-(tol - c F) / s)``; averaged over the nodes' weights. And the
     hand comes down ``gap`` behind the estimated face (:func:`descent_gap`): an
-    object nearer by more is landed on, ``Phi(-gap / s)``, independent of the rest.
+    object nearer by more is landed on, ``Phi(-gap / s)``, independent of the rest. And the
+    planned hand must stay on the object's face along the push
+    (:func:`executive.risk.push_contact.face_contact`), independent of the rest too.
 
     Returns:
         The report (mode ``grasp``, the drop mode's name in the combination); details: the
-        nominal force, the arm's limits, how short the object stops, the stall's share.
+        nominal force, the arm's limits, how short the object stops, the stall's share, how the
+        planned hand keeps to the face.
     """
     limits = push_limits(world, plan)
     if limits is None:
@@ -318,7 +322,10 @@ def assess_placement(
     stalled = (force > limits.saturation) | (room <= 0.0)
     # Nearer than estimated by more than the descent's gap, the object is landed on.
     landed = float(normal_cdf(-descent_gap(world) / sigma)) if sigma > 0.0 else 0.0
-    probability = 1.0 - (1.0 - landed) * (1.0 - float(np.sum(weights * np.where(stalled, 1.0, across))))
+    contact = face_contact(world, plan, uncertainty)
+    lost = contact.probability if contact is not None else 0.0
+    kept = (1.0 - landed) * (1.0 - lost)
+    probability = 1.0 - kept * (1.0 - float(np.sum(weights * np.where(stalled, 1.0, across))))
     details: dict[str, float | str] = {
         "grasp": "none: a push",
         "push_force": needed,
@@ -329,9 +336,16 @@ def assess_placement(
         "short_by": limits.compliance * needed,
         "stall_probability": float(np.sum(weights[stalled])),
         "landing_probability": landed,
-        "drop_reason": "the push falls short: the hand yields or stalls behind the object"
-        if np.any(stalled & (weights > 0.0))
-        else "the object's position error across the push",
+        **(contact.details() if contact is not None else {}),
+        "drop_reason": _drop_reason(bool(np.any(stalled & (weights > 0.0))), lost),
     }
     severity = float(risk_config.severity.drop)
     return RiskReport("drop", probability, (probability, probability), severity, probability, details=details)
+
+
+def _drop_reason(stalled: bool, lost: float) -> str:
+    if lost >= 0.5:
+        return "the planned hand leaves the object's face: it passes over or past the object"
+    if stalled:
+        return "the push falls short: the hand yields or stalls behind the object"
+    return "the object's position error across the push"

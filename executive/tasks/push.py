@@ -29,6 +29,7 @@ from numpy.typing import NDArray
 from executive.planning.plan import CompositionConfig, Step
 from executive.planning.planner import PlanningError
 from executive.risk.push import CONTACT_GAP, descent_gap
+from executive.risk.push_contact import half_extent
 from executive.schema.declarations import Block
 from executive.schema.scene_keys import OBJECT_NAME, XY
 from executive.schema.types import Body, SceneConfig
@@ -160,20 +161,6 @@ def push_force(world: World, obj: str) -> float:
     return mu * mass * float(np.linalg.norm(model.opt.gravity))
 
 
-def _half_extent(body: Body, quat: FloatArray, direction: FloatArray) -> float:
-    """Half the object's extent along the horizontal unit ``direction`` (its support function)."""
-    rot = np.zeros(9)
-    mujoco.mju_quat2Mat(rot, quat)
-    axes = rot.reshape(3, 3)  # columns: the body's axes in the world
-    along = np.abs(direction @ axes)
-    if body.shape == "box":
-        return float(np.sum(along * np.asarray(body.size) / 2.0))
-    if body.shape == "cylinder":
-        radius, length = body.size
-        return float(along[2] * length / 2.0 + radius * math.sqrt(max(0.0, 1.0 - along[2] ** 2)))
-    return float(body.size[0])
-
-
 def _hand_face(
     world: World, side: str, site_quat: FloatArray, direction: FloatArray, band: tuple[float, float]
 ) -> tuple[float, float]:
@@ -259,7 +246,7 @@ def push_line(world: World, task: PushTask, side: str) -> PushLine:
     hand_yaw = math.atan2(u[1], u[0])
     probe = HandFrames(world).target(side, np.zeros(3), hand_yaw)
     reach, top = _hand_face(world, side, probe.quat, u, (site_height - height, site_height))
-    half = _half_extent(body, quat, u)
+    half = half_extent(body, quat, u)
     _check_slides(world, task.object, side, half, (TIP_CLEARANCE, min(height, site_height + top)))
     z = table + site_height
     start = np.array([pos[0], pos[1], z]) - (half + reach + descent_gap(world)) * u
@@ -289,6 +276,7 @@ def push_steps(world: World, task: PushTask, side: str, cfg: CompositionConfig) 
             carried=(side, obj),
             allow_contact=(obj, "table_top"),
             force=(force[0], force[1], force[2]),
+            straight=True,
         )
         for k in range(1, legs + 1)
     ]

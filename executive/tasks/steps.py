@@ -70,6 +70,7 @@ def plan_alternative(
             carried=step.carried,
             allow_contact=step.allow_contact,
             rest=step.kind == "home",
+            straight=step.straight,
         )
         trajectories[step.name] = traj
         q = traj.qpos[-1]
