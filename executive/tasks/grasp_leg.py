@@ -1,8 +1,8 @@
 """One hand moves an object with a chosen grasp (:mod:`executive.tasks.grasp_candidates`).
 
 Every grasp takes the one-hand leg (:func:`executive.tasks.phases.one_hand_leg`). From above,
-the jaws close across the object's local y (``top``) or x (``top_across``: the same leg with the
-object's axes turned a quarter turn). A grasp from a side (``front``, ``side``; a
+the jaws close across the object's local y (``top``) or x (``top_across``: the hand turned a
+quarter turn). A grasp from a side (``front``, ``side``; a
 :class:`LevelGrip`) comes in along its approach at the height the candidate chose, carries the
 object in the same lane (the hand's frame turned about the vertical with the object's yaw), puts
 it down and backs out along the approach before it goes home.
@@ -26,7 +26,7 @@ from executive.planning.planner import HandTarget
 from executive.schema.types import Body
 from executive.tasks.grasp_candidates import GRASPS, GraspCandidate
 from executive.tasks.hands import HandFrames
-from executive.tasks.phases import one_hand_leg, turned_about_z
+from executive.tasks.phases import TopDown, one_hand_leg, turned_about_z
 
 __all__ = ["LevelGrip", "grasp_leg", "turned"]
 
@@ -81,11 +81,10 @@ def grasp_leg(
         the steps of :func:`executive.tasks.phases.one_hand_leg` with the candidate's grip.
     """
     kind = GRASPS[candidate.grasp]
-    (pos, yaw), (centre, end_yaw) = start, end
     if not kind.level:
         quarter = 0.0 if kind.closing == "object_y" else math.pi / 2
-        return one_hand_leg(h, side, body, (pos, yaw + quarter), (centre, end_yaw + quarter), cfg)
-    offset = np.asarray(candidate.site, dtype=float) - np.asarray(pos, dtype=float)
+        return one_hand_leg(h, side, body, start, end, cfg, TopDown(h, side, quarter))
+    offset = np.asarray(candidate.site, dtype=float) - np.asarray(start[0], dtype=float)
     offset[2] = 0.0  # the site's level offset from the centre; the layout has its height
     grip = LevelGrip(
         side, offset, np.asarray(candidate.quat, dtype=float), np.asarray(candidate.approach, dtype=float)

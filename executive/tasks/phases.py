@@ -27,6 +27,7 @@ __all__ = [
     "TopDown",
     "back_along_lane",
     "carry_lane_front",
+    "footprint_half_y",
     "grasp_height",
     "lane_carry",
     "one_hand_layout",
@@ -66,15 +67,31 @@ class Grip(Protocol):
 
 @dataclass(frozen=True)
 class TopDown:
-    """The grasp from above (:meth:`executive.tasks.hands.HandFrames.target`)."""
+    """The grasp from above (:meth:`executive.tasks.hands.HandFrames.target`), the jaws across the
+    object's local y, or turned by ``turn`` (rad) from it (``pi / 2``: across its local x)."""
 
     h: HandFrames
     side: str
+    turn: float = 0.0
     approach: FloatArray = field(default_factory=lambda: -UP)
 
     def at(self, point: FloatArray, hand_yaw: float, grasp_yaw: float | None = None) -> HandTarget:
         """See :class:`Grip`."""
-        return self.h.target(self.side, point, hand_yaw, grasp_yaw)
+        grasped = None if grasp_yaw is None else grasp_yaw + self.turn
+        return self.h.target(self.side, point, hand_yaw + self.turn, grasped)
+
+
+def footprint_half_y(body: Body, yaws: tuple[float, ...]) -> float:
+    """Half the extent along the world's y of ``body``'s footprint, the most over the yaws (rad)
+    between the least and the largest of ``yaws`` (a box: ``L |sin| + W |cos|`` of its half sizes)."""
+    if body.shape != "box":
+        return float(body.size[0])  # a cylinder's or a sphere's radius
+    half_l, half_w = body.size[0] / 2, body.size[1] / 2
+    low, high = min(yaws), max(yaws)
+    peak = math.atan2(half_l, half_w)  # where L |sin| + W |cos| is largest, every half turn
+    turns = range(math.floor((low - peak) / math.pi) - 1, math.ceil((high + peak) / math.pi) + 2)
+    inside = [a + k * math.pi for a in (peak, -peak) for k in turns if low <= a + k * math.pi <= high]
+    return max(half_l * abs(math.sin(a)) + half_w * abs(math.cos(a)) for a in (low, high, *inside))
 
 
 def grasp_height(body: Body, centre_z: float, cfg: CompositionConfig) -> float:
@@ -255,18 +272,20 @@ def one_hand_layout(
 ) -> OneHandLayout:
     """The pick, lane and place of one hand moving ``body`` from ``start`` to ``end`` (centre, yaw).
 
-    The lane runs in front of what the carry would pass, the carried object skirting the
-    obstacles' front at ``obstacle_clearance`` (:func:`carry_lane_front`). ``grasp_z``: the hand
-    site's height at the grasp (None: a top-down grasp's, :func:`grasp_height`).
+    The lane runs in front of what the carry would pass (what overlaps the y the object's
+    footprint sweeps from ``start``'s yaw to ``end``'s, :func:`footprint_half_y`), the carried
+    object skirting the obstacles' front at ``obstacle_clearance`` (:func:`carry_lane_front`).
+    ``grasp_z``: the hand site's height at the grasp (None: a top-down grasp's, :func:`grasp_height`).
     """
-    (pos, _), (centre, _) = start, end
+    (pos, yaw), (centre, end_yaw) = start, end
     z = grasp_height(body, float(pos[2]), cfg) if grasp_z is None else grasp_z
     grasp = np.array([pos[0], pos[1], z])
     place_at = centre + (grasp[2] - pos[2]) * UP
     carry_z = max(grasp[2] + cfg.lift_height, place_at[2] + cfg.approach_height)
     length = body.size[0] if body.shape == "box" else 2 * body.size[0]
     scene = h.world.scenario.scene
-    reach, near = length / 2 + cfg.obstacle_clearance, min(pos[0], centre[0]) - length / 2
+    reach = footprint_half_y(body, (yaw, end_yaw)) + cfg.obstacle_clearance
+    near = min(pos[0], centre[0]) - length / 2
     above = carry_z + cfg.approach_height  # the hand and wrist over the carried object
     front_x = carry_lane_front(scene, (pos[1], centre[1]), reach, h.base[0], pos[0], near, above)
     lane_x = min(front_x - cfg.obstacle_clearance - length / 2, grasp[0], place_at[0])
