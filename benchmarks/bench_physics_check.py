@@ -42,12 +42,15 @@ from executive.schema.types import Scenario
 from executive.world.model import build
 
 
-def dry_run_overhead(scenario: Scenario) -> None:
+def dry_run_overhead(scenario: Scenario) -> dict[str, float]:
+    """Prints each alternative's dry run against the raw replay of its steps; returns the sums
+    (``wall``, ``cpu``, ``raw_wall``, ``raw_cpu``: seconds; ``steps``)."""
     world = build(scenario)
     results = assess_task(world, scenario.mission[0])
     estimate = estimate_scenario(world)
     print(f"{'alternative':<15}{'steps':>8}{'dry s':>8}{'raw s':>8}{'wall x':>8}{'cpu x':>8}  outcome")
     totals = np.zeros(4)
+    steps = 0
     for alt in results:
         if alt.plan is None:
             print(f"{alt.name:<15}infeasible: {alt.error}")
@@ -70,6 +73,7 @@ def dry_run_overhead(scenario: Scenario) -> None:
         _replay(probe.model, state0, rows, len(rows))
         raw_cpu = time.thread_time() - c1
         totals += (wall, cpu, raw_wall, raw_cpu)
+        steps += len(rows)
         print(
             f"{alt.name:<15}{len(rows):>8}{wall:>8.2f}{raw_wall:>8.2f}{wall / raw_wall:>8.2f}"
             f"{cpu / raw_cpu:>8.2f}  {record['outcome']}"
@@ -78,6 +82,8 @@ def dry_run_overhead(scenario: Scenario) -> None:
         f"{'all':<15}{'':>8}{totals[0]:>8.2f}{totals[2]:>8.2f}{totals[0] / totals[2]:>8.2f}"
         f"{totals[1] / totals[3]:>8.2f}  (target 1.3)"
     )
+    sums = dict(zip(("wall", "cpu", "raw_wall", "raw_cpu"), map(float, totals), strict=True))
+    return sums | {"steps": steps}
 
 
 def decision(scenario: Scenario, pool: RolloutPool, label: str) -> None:
