@@ -48,7 +48,7 @@ from bench_physics_check import dry_run_overhead
 from bench_planning import measure as plan_measure
 from bench_rollout_allocation import decide_all, raw_step_s, with_config
 
-from executive.cli.plan import stance_after
+from executive.decision.after_task import state_after
 from executive.decision.assessment import assess_task
 from executive.decision.physics_check import PhysicsCheck, RolloutPool
 from executive.runtime.mission import freeze_startup_heap
@@ -146,7 +146,7 @@ def planned_durations() -> dict[str, dict[str, float | None]]:
         for i, task in enumerate(scenario.mission):
             results = assess_task(world, task, q_start=q_start)
             out[f"{name} task {i}"] = {a.name: (a.plan.duration if a.plan else None) for a in results}
-            q_start = stance_after(scenario, world, task, results, q_start)
+            q_start = state_after(scenario, world, task, results, q_start)
     return out
 
 

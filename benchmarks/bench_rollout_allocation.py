@@ -35,10 +35,9 @@ import mujoco
 import numpy as np
 from bench_executive import STATE, _PeriodRecording, _replay
 
-from executive.cli.plan import stance_after
+from executive.decision.after_task import chosen_index, state_after
 from executive.decision.assessment import assess_task
 from executive.decision.physics_check import PhysicsCheck, RolloutJob, RolloutPool, estimate_scenario, run_job
-from executive.report.plots import chosen_index
 from executive.scenario import load
 from executive.schema.types import Scenario
 from executive.world.model import build
@@ -95,7 +94,7 @@ def decide_all(scenario: Scenario, physics: PhysicsCheck) -> dict[str, Any]:
                 "values": {a.name: a.risk.value(ordering) for a in alternatives if a.risk is not None},
             }
         )
-        q_start = stance_after(scenario, world, task, alternatives, q_start)
+        q_start = state_after(scenario, world, task, alternatives, q_start)
     return {"tasks": tasks, "steps": steps, "check_s": check_s, "plan_s": plan_s}
 
 

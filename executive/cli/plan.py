@@ -1,7 +1,8 @@
 """``executive plan``: every alternative of every task planned, its risk assessed and checked in
 physics (dry runs, rollouts), printed as a table (or ``--json``), nothing executed.
 
-After a task whose chosen alternative walks, the next task is planned from where that walk ends.
+Each task is planned from where the one before leaves the robot and the objects (its chosen
+alternative's plan: :func:`executive.decision.after_task.state_after`).
 """
 
 from __future__ import annotations
@@ -22,13 +23,13 @@ from executive.cli.arguments import (
     load_gated,
 )
 from executive.cli.output_paths import check_folder
-from executive.schema.types import Scenario, Task
+from executive.schema.types import Scenario
 from executive.world.model import World, build
 
 if TYPE_CHECKING:
     from executive.decision.assessment import AlternativeRisk
 
-__all__ = ["add_parser", "run_plan", "stance_after"]
+__all__ = ["add_parser", "run_plan"]
 
 FloatArray = NDArray[np.float64]
 
@@ -46,6 +47,7 @@ def add_parser(sub: argparse._SubParsersAction[argparse.ArgumentParser]) -> None
 
 def run_plan(args: argparse.Namespace) -> int:
     """``executive plan``: each task's alternatives planned, assessed and checked in physics."""
+    from executive.decision.after_task import state_after
     from executive.decision.assessment import assess_task
     from executive.decision.physics_check import PhysicsCheck
     from executive.report.plots import risk_json, risk_table
@@ -57,7 +59,7 @@ def run_plan(args: argparse.Namespace) -> int:
     tasks = []
     physics = PhysicsCheck(scenario.risk.rollouts.jobs)
     physics.pool.warm()  # the workers start while the planner works
-    q_start: FloatArray | None = None  # home; after a walk, where the chosen walk ends
+    q_start: FloatArray | None = None  # home; then where the task before leaves the robot
     try:
         for i, task in enumerate(scenario.mission):
             label = f"{i}: {task.label()}"
@@ -67,35 +69,13 @@ def run_plan(args: argparse.Namespace) -> int:
                 print(_checking_text(scenario, analytic), flush=True)
             alternatives, _ = physics.check(world, analytic, q_start=q_start)
             tasks.append((label, alternatives))
-            q_start = stance_after(scenario, world, task, alternatives, q_start)
+            q_start = state_after(scenario, world, task, alternatives, q_start)
             _print_plan(args, scenario, world, i, label, alternatives)
     finally:
         physics.close()
     if args.json:
         print(risk_json(scenario, tasks))
     return EXIT_OK
-
-
-def stance_after(
-    scenario: Scenario,
-    world: World,
-    task: Task,
-    alternatives: list[AlternativeRisk],
-    q_start: FloatArray | None,
-) -> FloatArray | None:
-    """After a task that walks (its kind ``moves_base``, or its chosen alternative walks), the start
-    of the next: where the chosen plan ends, the estimate's base put there; else ``q_start``."""
-    from executive.report.plots import chosen_index
-    from executive.tasks.registry import get as task_kind
-
-    chosen = chosen_index(alternatives, scenario.risk.ordering)
-    plan = alternatives[chosen].plan if chosen is not None else None
-    if plan is None or not (task_kind(task.kind).moves_base or any(plan.walks.values())):
-        return q_start
-    end = plan.ordered_trajectories()[-1].qpos[-1].copy()
-    world.data.qpos[world.base_qpos] = end[world.base_qpos]
-    world.follows_base = True
-    return end
 
 
 def _checking_text(scenario: Scenario, analytic: list[AlternativeRisk]) -> str:

@@ -17,7 +17,15 @@ from executive.planning.planner import HandTarget, Trajectory
 from executive.planning.stepping import StepPlan
 from executive.schema.types import Task
 
-__all__ = ["MOVE_TOLERANCE", "AlternativePlan", "CompositionConfig", "Step", "StepKind", "held_at_start"]
+__all__ = [
+    "MOVE_TOLERANCE",
+    "AlternativePlan",
+    "CompositionConfig",
+    "Step",
+    "StepKind",
+    "held_at_end",
+    "held_at_start",
+]
 
 FloatArray = NDArray[np.float64]
 
@@ -94,6 +102,21 @@ class AlternativePlan:
 
     def ordered_trajectories(self) -> list[Trajectory]:
         return [self.trajectories[s.name] for s in self.steps if s.name in self.trajectories]
+
+
+def held_at_end(steps: tuple[Step, ...] | list[Step]) -> dict[str, str]:
+    """The objects the hands hold when an alternative ends: side -> object.
+
+    What they hold at its start (:func:`held_at_start`), then each ``grasp`` takes its object into
+    its hand and each ``release`` opens it; a push moves its object without holding it.
+    """
+    held = dict(held_at_start(steps))
+    for step in steps:
+        if step.kind == "grasp" and step.obj:
+            held[step.side] = step.obj
+        elif step.kind == "release":
+            held.pop(step.side, None)
+    return held
 
 
 def held_at_start(steps: tuple[Step, ...] | list[Step]) -> dict[str, str]:

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from executive.decision.after_task import chosen_index
 from executive.decision.assessment import AlternativeRisk
 from executive.decision.physics_check import physics_text
 from executive.report.grasp_counts import grasp_counts, grasp_counts_text
@@ -21,13 +22,7 @@ from executive.risk.collision import breach_summary
 from executive.schema.failure_modes import failure_modes, mode_names
 from executive.schema.types import Scenario
 
-__all__ = ["chosen_index", "plot_alternatives", "risk_json", "risk_table"]
-
-
-def chosen_index(alternatives: Sequence[AlternativeRisk], ordering: str) -> int | None:
-    """Index of the feasible alternative with the lowest risk by ``ordering`` (None if none is feasible)."""
-    feasible = [(a.risk.value(ordering), i) for i, a in enumerate(alternatives) if a.risk is not None]
-    return min(feasible)[1] if feasible else None
+__all__ = ["plot_alternatives", "risk_json", "risk_table"]
 
 
 _POLICY_TEXT = {
